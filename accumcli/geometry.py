@@ -1,0 +1,88 @@
+"""Rigid transforms as (4, 4) float64 matrices, and the few operations on them.
+
+``T_a_b`` maps points in frame b into frame a (see the package docstring).
+Rotation conversions use scipy's ``Rotation`` (quaternions ``xyzw``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+
+def make_transform(rotation: np.ndarray, translation) -> np.ndarray:
+    """(4, 4) transform from a (3, 3) rotation and a (3,) translation in metres."""
+    T = np.eye(4)
+    T[:3, :3] = rotation
+    T[:3, 3] = translation
+    return T
+
+
+def transform_from_quat(translation, quat_xyzw) -> np.ndarray:
+    """(4, 4) transform from a translation (metres) and a unit quaternion xyzw."""
+    return make_transform(Rotation.from_quat(np.asarray(quat_xyzw, float)).as_matrix(), translation)
+
+
+def quat_from_transform(T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(translation (3,), quat_xyzw (4,)) of a transform; the quaternion has w >= 0."""
+    q = Rotation.from_matrix(T[:3, :3]).as_quat()
+    if q[3] < 0:
+        q = -q
+    return T[:3, 3].copy(), q
+
+
+def invert(T: np.ndarray) -> np.ndarray:
+    """Inverse of a rigid transform: ``invert(T_a_b) == T_b_a``."""
+    R = T[:3, :3]
+    return make_transform(R.T, -R.T @ T[:3, 3])
+
+
+def transform_points(T: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Apply ``T_a_b`` to ``points: (N, 3)`` in b; returns (N, 3) in a."""
+    return points @ T[:3, :3].T + T[:3, 3]
+
+
+def rotate_vectors(T: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+    """Rotate ``vectors: (N, 3)`` (directions, no translation) by ``T``."""
+    return vectors @ T[:3, :3].T
+
+
+def interpolate(T0: np.ndarray, T1: np.ndarray, s: float) -> np.ndarray:
+    """Pose at fraction ``s`` in [0, 1] between T0 and T1: linear translation, slerp rotation."""
+    rotations = Rotation.from_matrix(np.stack([T0[:3, :3], T1[:3, :3]]))
+    R = Slerp([0.0, 1.0], rotations)([s]).as_matrix()[0]
+    return make_transform(R, (1.0 - s) * T0[:3, 3] + s * T1[:3, 3])
+
+
+def se3_exp(xi: np.ndarray) -> np.ndarray:
+    """Transform of a twist ``xi = (rx, ry, rz, tx, ty, tz)`` (rotation vector in
+    radians, translation in metres), as a left-multiplied increment.
+
+    The rotation and translation parts are applied independently
+    (``R = exp(r)``, ``t = t``); for the small increments of Gauss-Newton this
+    is as good as the full SE(3) exponential and keeps Jacobians simple.
+    """
+    return make_transform(Rotation.from_rotvec(xi[:3]).as_matrix(), xi[3:])
+
+
+def rotation_angle_deg(R: np.ndarray) -> float:
+    """Angle in degrees of a (3, 3) rotation."""
+    c = (np.trace(R) - 1.0) / 2.0
+    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+
+
+def pose_error(T_est: np.ndarray, T_true: np.ndarray) -> tuple[float, float]:
+    """(rotation error in degrees, translation error in metres) between two poses."""
+    dR = T_est[:3, :3].T @ T_true[:3, :3]
+    return rotation_angle_deg(dR), float(np.linalg.norm(T_est[:3, 3] - T_true[:3, 3]))
+
+
+def mean_transform(Ts: np.ndarray) -> np.ndarray:
+    """Mean of ``Ts: (N, 4, 4)`` rigid transforms (chordal mean rotation, mean translation)."""
+    R = Rotation.from_matrix(Ts[:, :3, :3]).mean().as_matrix()
+    return make_transform(R, Ts[:, :3, 3].mean(axis=0))
+
+
+def unit(vectors: np.ndarray) -> np.ndarray:
+    """Rows of ``vectors: (N, 3)`` scaled to unit length."""
+    return vectors / np.linalg.norm(vectors, axis=-1, keepdims=True)

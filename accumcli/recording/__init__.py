@@ -1,0 +1,10 @@
+"""Recording I/O: the only part of accum that knows MCAP (reading, writing,
+transform tree, calibration and rectification)."""
+
+from .calibration import CameraCalibration, StereoIntrinsics, StereoRectifier
+from .reader import Recording, RecordingInfo, StereoFrame, Topics
+from .tf_tree import TransformTree
+from .writer import RecordingWriter
+
+__all__ = ["CameraCalibration", "Recording", "RecordingInfo", "RecordingWriter", "StereoFrame",
+           "StereoIntrinsics", "StereoRectifier", "Topics", "TransformTree"]

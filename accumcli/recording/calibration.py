@@ -1,0 +1,118 @@
+"""Stereo calibration with ROS CameraInfo semantics, and rectification.
+
+A ``CameraCalibration`` holds K, D, R, P as recorded. ``StereoRectifier`` turns a
+left/right pair of them into the rectified stereo intrinsics that everything
+downstream uses, and (for raw images) the remap tables, computed once per
+calibration. Images are taken as already rectified when D is zero, R is the
+identity and K equals P's left 3x3: then they pass through untouched.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from ..errors import RecordingError
+
+SUPPORTED_DISTORTION = {"plumb_bob", "rational_polynomial", ""}
+
+
+@dataclass(frozen=True)
+class CameraCalibration:
+    """One camera's calibration as recorded (CameraInfo semantics).
+
+    K: (3, 3) raw intrinsics, pixels; D: (n,) distortion; R: (3, 3) rectifying
+    rotation; P: (3, 4) projection of the rectified camera (pixels, metres).
+    """
+
+    width: int
+    height: int
+    K: np.ndarray
+    D: np.ndarray
+    R: np.ndarray
+    P: np.ndarray
+    distortion_model: str
+    frame_id: str
+
+    @property
+    def is_rectified(self) -> bool:
+        return (not np.any(self.D)) and np.allclose(self.R, np.eye(3)) and np.allclose(self.K, self.P[:, :3])
+
+    def key(self) -> tuple:
+        """Hashable identity, to reuse remap tables while the calibration is unchanged."""
+        return (self.width, self.height, self.K.tobytes(), self.D.tobytes(), self.R.tobytes(), self.P.tobytes())
+
+
+@dataclass(frozen=True)
+class StereoIntrinsics:
+    """The rectified stereo pair: pixels and metres, left camera optical frame.
+
+    A point (X, Y, Z) in the left camera frame projects to
+    ``u = fx X / Z + cx``, ``v = fy Y / Z + cy`` in the left image and to
+    ``u - fx * baseline / Z`` (same v) in the right image.
+    """
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    baseline: float
+    width: int
+    height: int
+
+    @property
+    def K(self) -> np.ndarray:
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Project ``points: (N, 3)`` metres, left camera frame.
+
+        Returns (uv_left (N, 2), uv_right (N, 2), z (N,)) in pixels, (u, v) order.
+        """
+        z = points[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = self.fx * points[:, 0] / z + self.cx
+            v = self.fy * points[:, 1] / z + self.cy
+            d = self.fx * self.baseline / z
+        return np.stack([u, v], axis=1), np.stack([u - d, v], axis=1), z
+
+    def as_dict(self) -> dict:
+        return {k: getattr(self, k) for k in ("fx", "fy", "cx", "cy", "baseline", "width", "height")}
+
+
+class StereoRectifier:
+    """Rectified intrinsics and (if needed) remap tables for one left/right calibration."""
+
+    def __init__(self, left: CameraCalibration, right: CameraCalibration):
+        for side, cal in (("left", left), ("right", right)):
+            if cal.distortion_model not in SUPPORTED_DISTORTION:
+                raise RecordingError(
+                    f"{side} calibration: distortion model {cal.distortion_model!r} is not supported "
+                    f"(expected plumb_bob or rational_polynomial)")
+            if cal.P[0, 0] <= 0 or cal.P[1, 1] <= 0:
+                raise RecordingError(f"{side} calibration: P has no focal length (uncalibrated camera)")
+        if (left.width, left.height) != (right.width, right.height):
+            raise RecordingError(
+                f"left and right calibrations differ in size: {left.width}x{left.height} vs {right.width}x{right.height}")
+        P_left, P_right = left.P, right.P
+        if not np.allclose(P_left[:, :3], P_right[:, :3], rtol=1e-6, atol=1e-6):
+            raise RecordingError("left and right P differ in their 3x3 part: the pair is not rectified to one camera")
+        baseline = -P_right[0, 3] / P_right[0, 0] + P_left[0, 3] / P_left[0, 0]
+        if baseline <= 0:
+            raise RecordingError(
+                f"right calibration: expected P[0,3] = -fx * baseline < 0, found {P_right[0, 3]:g}")
+        self.intrinsics = StereoIntrinsics(
+            fx=float(P_left[0, 0]), fy=float(P_left[1, 1]), cx=float(P_left[0, 2]), cy=float(P_left[1, 2]),
+            baseline=float(baseline), width=int(left.width), height=int(left.height))
+        self.rectified_input = left.is_rectified and right.is_rectified
+        self._maps = None if self.rectified_input else [
+            cv2.initUndistortRectifyMap(c.K, c.D, c.R, c.P[:, :3], (c.width, c.height), cv2.CV_16SC2)
+            for c in (left, right)]
+
+    def rectify(self, left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rectified (H, W) images; the inputs themselves when already rectified."""
+        if self._maps is None:
+            return left, right
+        return tuple(cv2.remap(img, m1, m2, cv2.INTER_LINEAR) for img, (m1, m2) in zip((left, right), self._maps))

@@ -1,0 +1,149 @@
+"""A transform tree with time interpolation (the ROS tf semantics of formats.md).
+
+Each parent/child pair holds its samples sorted by time. A pair with a single
+sample in the whole recording, or one marked static (``/tf_static``), holds at
+all times. A lookup composes the edges on the path between two frames, each
+interpolated at the query time (linear translation, slerp rotation). A query
+outside an edge's sample range by more than the tolerance is refused with the
+reason, never extrapolated.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict, deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import PoseUnavailable
+from ..geometry import interpolate, invert, transform_from_quat
+
+
+@dataclass
+class EdgeSamples:
+    """Samples of ``T_parent_child`` over time.
+
+    times_ns: (N,) int64; translations: (N, 3) metres; quats_xyzw: (N, 4);
+    valid: (N,) bool, False for a NaN or zero quaternion (kept so that a
+    lookup that needs it fails loudly instead of silently bridging it).
+    """
+
+    parent: str
+    child: str
+    times_ns: np.ndarray
+    translations: np.ndarray
+    quats_xyzw: np.ndarray
+    valid: np.ndarray
+    static: bool
+
+    def at(self, t_ns: int, tolerance_ns: int) -> np.ndarray:
+        """``T_parent_child`` at ``t_ns``; raises ``PoseUnavailable``."""
+        if self.static:
+            i = int(np.flatnonzero(self.valid)[-1]) if self.valid.any() else -1
+            if i < 0:
+                raise PoseUnavailable(f"{self.parent} -> {self.child}: the static transform has an invalid quaternion")
+            return self._transform(i)
+        t = self.times_ns
+        if t_ns < t[0] - tolerance_ns or t_ns > t[-1] + tolerance_ns:
+            raise PoseUnavailable(
+                f"{self.parent} -> {self.child}: time {t_ns * 1e-9:.3f} s is outside the transform samples "
+                f"[{t[0] * 1e-9:.3f}, {t[-1] * 1e-9:.3f}] s")
+        hi = int(np.searchsorted(t, t_ns, side="left"))
+        if hi < len(t) and t[hi] == t_ns:
+            lo = hi
+        else:
+            lo, hi = max(hi - 1, 0), min(hi, len(t) - 1)
+        for i in {lo, hi}:
+            if not self.valid[i]:
+                raise PoseUnavailable(
+                    f"{self.parent} -> {self.child}: the sample at {t[i] * 1e-9:.3f} s has an invalid quaternion")
+        if lo == hi:
+            return self._transform(lo)
+        s = (t_ns - t[lo]) / (t[hi] - t[lo])
+        return interpolate(self._transform(lo), self._transform(hi), float(s))
+
+    def _transform(self, i: int) -> np.ndarray:
+        return transform_from_quat(self.translations[i], self.quats_xyzw[i])
+
+
+@dataclass
+class TransformTree:
+    """Collects transform samples, then answers ``lookup(target, source, t)``."""
+
+    _raw: dict = field(default_factory=lambda: defaultdict(list))
+    _static_pairs: set = field(default_factory=set)
+    edges: dict = field(default_factory=dict)
+
+    def add(self, parent: str, child: str, t_ns: int, translation, quat_xyzw, static: bool = False) -> None:
+        """Record one sample of ``T_parent_child`` (translation metres, quaternion xyzw)."""
+        self._raw[(parent, child)].append((int(t_ns), *translation, *quat_xyzw))
+        if static:
+            self._static_pairs.add((parent, child))
+        self.edges.pop((parent, child), None)
+
+    def _edge(self, key) -> EdgeSamples:
+        if key not in self.edges:
+            rows = np.array(sorted(self._raw[key], key=lambda r: r[0]), dtype=float)
+            q = rows[:, 4:8]
+            norm = np.linalg.norm(q, axis=1)
+            valid = np.isfinite(rows[:, 1:8]).all(axis=1) & (norm > 1e-9)
+            q = np.where(valid[:, None], q / np.where(valid, norm, 1.0)[:, None], q)
+            self.edges[key] = EdgeSamples(
+                parent=key[0], child=key[1], times_ns=rows[:, 0].astype(np.int64),
+                translations=rows[:, 1:4], quats_xyzw=q, valid=valid,
+                static=key in self._static_pairs or len(rows) == 1)
+        return self.edges[key]
+
+    @property
+    def frames(self) -> set[str]:
+        return {f for key in self._raw for f in key}
+
+    def path(self, target: str, source: str) -> list[tuple[tuple[str, str], bool]] | None:
+        """Edges from ``target`` to ``source`` as ((parent, child), forward) or None if unconnected.
+
+        ``forward`` means the edge is traversed parent -> child, i.e. it
+        contributes ``T_parent_child`` to ``T_target_source``.
+        """
+        neighbours = defaultdict(list)
+        for parent, child in self._raw:
+            neighbours[parent].append((child, (parent, child), True))
+            neighbours[child].append((parent, (parent, child), False))
+        previous = {target: None}
+        queue = deque([target])
+        while queue:
+            frame = queue.popleft()
+            if frame == source:
+                break
+            for nxt, key, forward in neighbours[frame]:
+                if nxt not in previous:
+                    previous[nxt] = (frame, key, forward)
+                    queue.append(nxt)
+        if source not in previous:
+            return None
+        steps, frame = [], source
+        while previous[frame] is not None:
+            frame, key, forward = previous[frame]
+            steps.append((key, forward))
+        return steps[::-1]
+
+    def lookup(self, target: str, source: str, t_ns: int, tolerance_ns: int = 1_000_000) -> np.ndarray:
+        """``T_target_source`` at ``t_ns``; raises ``PoseUnavailable`` with the reason."""
+        steps = self.path(target, source)
+        if steps is None:
+            raise PoseUnavailable(f"no path from {target} to {source} in the transform tree")
+        T = np.eye(4)
+        for key, forward in steps:
+            T_parent_child = self._edge(key).at(t_ns, tolerance_ns)
+            T = T @ (T_parent_child if forward else invert(T_parent_child))
+        return T
+
+    def time_range(self, target: str, source: str) -> tuple[int, int] | None:
+        """Intersection of the moving edges' sample ranges on the path, or None if all static."""
+        steps = self.path(target, source) or []
+        lo, hi = None, None
+        for key, _ in steps:
+            edge = self._edge(key)
+            if not edge.static:
+                lo = edge.times_ns[0] if lo is None else max(lo, edge.times_ns[0])
+                hi = edge.times_ns[-1] if hi is None else min(hi, edge.times_ns[-1])
+        return None if lo is None else (int(lo), int(hi))
