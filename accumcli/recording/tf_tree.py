@@ -59,7 +59,7 @@ class EdgeSamples:
                     f"{self.parent} -> {self.child}: the sample at {t[i] * 1e-9:.3f} s has an invalid quaternion")
         if lo == hi:
             return self._transform(lo)
-        s = (t_ns - t[lo]) / (t[hi] - t[lo])
+        s = (int(t_ns) - int(t[lo])) / (int(t[hi]) - int(t[lo]))
         return interpolate(self._transform(lo), self._transform(hi), float(s))
 
     def _transform(self, i: int) -> np.ndarray:
@@ -83,14 +83,15 @@ class TransformTree:
 
     def _edge(self, key) -> EdgeSamples:
         if key not in self.edges:
-            rows = np.array(sorted(self._raw[key], key=lambda r: r[0]), dtype=float)
-            q = rows[:, 4:8]
+            samples = sorted(self._raw[key], key=lambda r: r[0])
+            times = np.array([r[0] for r in samples], np.int64)
+            rows = np.array([r[1:] for r in samples], dtype=float).reshape(-1, 7)
+            q = rows[:, 3:7]
             norm = np.linalg.norm(q, axis=1)
-            valid = np.isfinite(rows[:, 1:8]).all(axis=1) & (norm > 1e-9)
+            valid = np.isfinite(rows).all(axis=1) & (norm > 1e-9)
             q = np.where(valid[:, None], q / np.where(valid, norm, 1.0)[:, None], q)
             self.edges[key] = EdgeSamples(
-                parent=key[0], child=key[1], times_ns=rows[:, 0].astype(np.int64),
-                translations=rows[:, 1:4], quats_xyzw=q, valid=valid,
+                parent=key[0], child=key[1], times_ns=times, translations=rows[:, :3], quats_xyzw=q, valid=valid,
                 static=key in self._static_pairs or len(rows) == 1)
         return self.edges[key]
 

@@ -20,6 +20,10 @@ from .scene import Polygon, _clip_convex
 
 NEAR_M = 0.05
 DECAL_BIAS_M = 3e-4
+# cv2.fillConvexPoly fills every pixel within about half a pixel of the polygon
+# (measured: 0.5 px for axis-aligned edges, 0.4 px at 45 degrees); polygons are
+# shrunk by this much so that coverage, and so the anti-aliased edge, is unbiased.
+FILL_DILATION_PX = 0.47
 
 
 @dataclass(frozen=True)
@@ -78,7 +82,10 @@ def rasterize(layer: Layer, polygons: list[Polygon], T_camera_part: np.ndarray, 
         if x0 >= x1 or y0 >= y1:
             continue
         mask = np.zeros((y1 - y0, x1 - x0), np.uint8)
-        points = np.round(np.column_stack([u - x0, v - y0]) * 16).astype(np.int32)
+        shrunk = _shrink(np.column_stack([u - x0, v - y0]), FILL_DILATION_PX)
+        if shrunk is None:
+            continue
+        points = np.round(shrunk * 16).astype(np.int32)
         cv2.fillConvexPoly(mask, points, 1, cv2.LINE_8, 4)
         ys, xs = np.nonzero(mask)
         if ys.size == 0:
@@ -98,6 +105,29 @@ def rasterize(layer: Layer, polygons: list[Polygon], T_camera_part: np.ndarray, 
             closer = z < layer.depth[ys, xs]
         layer.depth[ys[closer], xs[closer]] = z[closer]
         layer.color[ys[closer], xs[closer]] = shade(normal, polygon.albedo, light)
+
+
+def _shrink(points: np.ndarray, distance: float) -> np.ndarray | None:
+    """Offset every edge of a convex (K, 2) polygon inward by ``distance``; None if it vanishes."""
+    edges = np.roll(points, -1, axis=0) - points
+    area2 = np.sum(points[:, 0] * np.roll(points[:, 1], -1) - np.roll(points[:, 0], -1) * points[:, 1])
+    length = np.hypot(edges[:, 0], edges[:, 1])
+    keep = length > 1e-9
+    if area2 == 0 or keep.sum() < 3:
+        return None
+    points, edges, length = points[keep], edges[keep], length[keep]
+    outward = np.sign(area2) * np.column_stack([edges[:, 1], -edges[:, 0]]) / length[:, None]
+    offsets = np.sum(outward * points, axis=1) - distance
+    # vertex i is where edge i-1 and edge i meet
+    n_prev, c_prev = np.roll(outward, 1, axis=0), np.roll(offsets, 1)
+    det = n_prev[:, 0] * outward[:, 1] - n_prev[:, 1] * outward[:, 0]
+    if np.any(np.abs(det) < 1e-9):
+        return points
+    x = (c_prev * outward[:, 1] - n_prev[:, 1] * offsets) / det
+    y = (n_prev[:, 0] * offsets - c_prev * outward[:, 0]) / det
+    shrunk = np.column_stack([x, y])
+    new_area2 = np.sum(shrunk[:, 0] * np.roll(shrunk[:, 1], -1) - np.roll(shrunk[:, 0], -1) * shrunk[:, 1])
+    return shrunk if np.sign(new_area2) == np.sign(area2) else None
 
 
 def reduce(layer: Layer, supersample: int) -> np.ndarray:

@@ -54,7 +54,7 @@ class SimulationOptions:
     baseline: float = 0.08
     noise_sigma: float = 2.0
     blur_sigma: float = 0.6
-    supersample: int = 3
+    supersample: int = 4
     per_frame_deg: float = 10.0
 
 
@@ -92,10 +92,10 @@ def _calibrations(o: SimulationOptions, camera: PinholeCamera, rng: np.random.Ge
         calibrations.append(CameraCalibration(o.width, o.height, K, D, R, P_side, "plumb_bob", frame_id))
         grid = np.stack(np.meshgrid(np.arange(o.width, dtype=np.float64), np.arange(o.height, dtype=np.float64)),
                         axis=-1).reshape(-1, 1, 2)
-        rect = cv2.undistortPointsIter(grid, K, D, R, P[:, :3], (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS,
-                                                                  40, 1e-6)).reshape(o.height, o.width, 2)
-        raw_maps.append((rect[..., 0] + RAW_MARGIN_PX).astype(np.float32),
-                        (rect[..., 1] + RAW_MARGIN_PX).astype(np.float32))
+        criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-9)
+        rect = cv2.undistortPoints(grid, K, D, R=R, P=P[:, :3], criteria=criteria).reshape(o.height, o.width, 2)
+        raw_maps.append(((rect[..., 0] + RAW_MARGIN_PX).astype(np.float32),
+                         (rect[..., 1] + RAW_MARGIN_PX).astype(np.float32)))
     return calibrations, raw_maps
 
 

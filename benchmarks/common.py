@@ -1,0 +1,38 @@
+"""Shared helpers of the benchmarks: cached simulated recordings, peak memory of a child process."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+CACHE = ROOT / "out" / "bench"
+
+
+def recording(name: str, **options) -> str:
+    """A simulated recording made once and kept in out/bench/ (same options, same file)."""
+    from accumcli.simulation import SimulationOptions, simulate
+
+    CACHE.mkdir(parents=True, exist_ok=True)
+    path = CACHE / f"{name}.mcap"
+    stamp = CACHE / f"{name}.options.json"
+    wanted = json.dumps(options, sort_keys=True)
+    if not path.exists() or not stamp.exists() or stamp.read_text() != wanted:
+        print(f"  (simulating {name}: {options})", flush=True)
+        simulate(str(path), SimulationOptions(**options))
+        stamp.write_text(wanted)
+    return str(path)
+
+
+def run_child(code: str) -> dict:
+    """Run Python ``code`` in a fresh single-threaded interpreter; it prints one JSON line, returned
+    with the child's peak resident memory (MB) added."""
+    wrapper = (code + "\nimport resource, json as _j\n"
+               "print(_j.dumps({**RESULT, 'peak_rss_mb': resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))")
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    out = subprocess.run([sys.executable, "-c", wrapper], env=env, check=True, capture_output=True, text=True,
+                         cwd=ROOT)
+    return json.loads(out.stdout.strip().splitlines()[-1])

@@ -1,0 +1,17 @@
+"""``make bench``: every benchmark, one thread, figures printed."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import bench_reader  # noqa: E402
+
+SUITES = {"reader": bench_reader.main}
+
+if __name__ == "__main__":
+    chosen = sys.argv[1:] or list(SUITES)
+    for name in chosen:
+        SUITES[name]()

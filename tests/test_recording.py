@@ -1,0 +1,200 @@
+"""The recording reader against simulated ground truth and hand-broken files."""
+
+from __future__ import annotations
+
+import logging
+
+import cv2
+import numpy as np
+import pytest
+
+from accumcli.errors import RecordingError
+from accumcli.geometry import make_transform, transform_from_quat, transform_points
+from accumcli.model_io import read_truth
+from accumcli.recording import Recording, RecordingWriter, TransformTree
+from accumcli.recording.messages import decode_image, image_to_msg
+from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+
+from . import helpers
+
+
+def _truth_of(path):
+    return read_truth(path.replace(".mcap", ".truth.json"))
+
+
+@pytest.mark.parametrize("fixture", ["small_recording", "tf_tree_recording", "raw_recording"])
+def test_poses_match_truth(fixture, request):
+    path = request.getfixturevalue(fixture)
+    truth = _truth_of(path)
+    with Recording(path) as rec:
+        frames = list(rec.frames())
+    assert len(frames) == len(truth.poses)
+    for frame in frames:
+        assert np.abs(frame.T_camera_object - truth.pose_at(frame.timestamp_ns)).max() < 1e-9
+
+
+def edge_offsets(image: np.ndarray, uv: np.ndarray, normals: np.ndarray, reach: int = 3) -> np.ndarray:
+    """Distance (px) from each point to the strongest gradient along its normal, for well-defined edges."""
+    gx = cv2.Sobel(image.astype(np.float32), cv2.CV_32F, 1, 0, ksize=3)
+    gy = cv2.Sobel(image.astype(np.float32), cv2.CV_32F, 0, 1, ksize=3)
+    steps = np.arange(-reach, reach + 1, dtype=np.float32)
+    px = (uv[:, :1] + steps * normals[:, :1]).astype(np.float32)
+    py = (uv[:, 1:] + steps * normals[:, 1:]).astype(np.float32)
+    sx = cv2.remap(gx, px, py, cv2.INTER_LINEAR)
+    sy = cv2.remap(gy, px, py, cv2.INTER_LINEAR)
+    along = np.abs(sx * normals[:, :1] + sy * normals[:, 1:])
+    best = np.argmax(along, axis=1)
+    strong = (along.max(axis=1) > 40) & (best > 0) & (best < len(steps) - 1)
+    i = np.arange(len(uv))[strong]
+    b = best[strong]
+    m0, m1, m2 = along[i, b - 1], along[i, b], along[i, b + 1]
+    offset = steps[b] + 0.5 * (m0 - m2) / np.where(m0 - 2 * m1 + m2 == 0, -1, m0 - 2 * m1 + m2)
+    return np.abs(offset)
+
+
+def mean_truth_edge_offset(path: str) -> float:
+    truth = _truth_of(path)
+    offsets = []
+    with Recording(path) as rec:
+        for frame in rec.frames():
+            T = frame.T_camera_object
+            for a, b in zip(truth.a, truth.b):
+                n = max(2, int(np.linalg.norm(b - a) / 0.003))
+                s = (np.arange(n) + 0.5) / n
+                points = transform_points(T, a + s[:, None] * (b - a))
+                uv_l, uv_r, z = frame.intrinsics.project(points)
+                for uv, img in ((uv_l, frame.left), (uv_r, frame.right)):
+                    d = uv[-1] - uv[0]
+                    normal = np.array([-d[1], d[0]]) / (np.hypot(*d) + 1e-12)
+                    inside = (uv[:, 0] > 5) & (uv[:, 0] < img.shape[1] - 6) & (uv[:, 1] > 5) & \
+                             (uv[:, 1] < img.shape[0] - 6)
+                    if inside.sum():
+                        offsets.append(edge_offsets(img, uv[inside], np.tile(normal, (inside.sum(), 1))))
+    return float(np.mean(np.concatenate(offsets)))
+
+
+def test_raw_images_are_rectified_onto_the_truth(raw_recording, small_recording):
+    raw = mean_truth_edge_offset(raw_recording)
+    rectified = mean_truth_edge_offset(small_recording)
+    print(f"mean truth-edge offset: raw {raw:.3f} px, rectified {rectified:.3f} px")
+    assert raw < 1.0
+    assert rectified < 1.0
+
+
+def test_rectification_maps_are_computed_once(raw_recording):
+    with Recording(raw_recording) as rec:
+        assert sum(1 for _ in rec.frames()) == 4
+        assert len(rec._rectifiers) == 1
+        assert not next(iter(rec._rectifiers.values())).rectified_input
+
+
+def test_transform_tree_chain_and_interpolation():
+    tree = TransformTree()
+    T_world_camera = make_transform(np.eye(3), [1.0, 2.0, 3.0])
+    tree.add("world", "camera", 0, [1.0, 2.0, 3.0], [0, 0, 0, 1], static=True)
+    tree.add("world", "arm", 0, [0.0, 0.0, 0.0], [0, 0, 0, 1])
+    q90 = [0, 0, np.sin(np.pi / 4), np.cos(np.pi / 4)]
+    tree.add("world", "arm", 1000, [0.0, 0.0, 1.0], q90)
+    tree.add("arm", "gripper", 5, [0.1, 0.0, 0.0], [0, 0, 0, 1])  # single sample: static
+    T = tree.lookup("camera", "gripper", 500)
+    q45 = [0, 0, np.sin(np.pi / 8), np.cos(np.pi / 8)]
+    expected = np.linalg.inv(T_world_camera) @ transform_from_quat([0, 0, 0.5], q45) @ \
+        make_transform(np.eye(3), [0.1, 0, 0])
+    assert np.abs(T - expected).max() < 1e-12
+    with pytest.raises(Exception, match="outside the transform samples"):
+        tree.lookup("camera", "gripper", 5000, tolerance_ns=10)
+    assert tree.path("camera", "nowhere") is None
+
+
+@pytest.mark.parametrize("encoding", ["mono8", "rgb8", "bgr8", "mono16", "png", "jpeg"])
+def test_image_decoding(encoding):
+    grey = helpers.image(3)
+    if encoding in ("png", "jpeg"):
+        msg = image_to_msg(grey, 0, "cam", encoding)
+    else:
+        data = {"mono8": grey, "rgb8": np.dstack([grey] * 3), "bgr8": np.dstack([grey] * 3),
+                "mono16": grey.astype("<u2") * 257}[encoding]
+        msg = RawImage(width=grey.shape[1], height=grey.shape[0], encoding=encoding,
+                       step=data.strides[0], data=data.tobytes())
+    decoded = decode_image(msg)
+    assert decoded.shape == grey.shape and decoded.dtype == np.uint8
+    tolerance = 30 if encoding == "jpeg" else 1
+    assert np.abs(decoded.astype(int) - grey).mean() < tolerance
+
+
+def test_corrupt_frame_is_skipped_with_a_warning(tmp_path, caplog):
+    path = helpers.write(tmp_path / "corrupt.mcap", n=5, corrupt_left=(2,))
+    with caplog.at_level(logging.WARNING), Recording(path) as rec:
+        indices = [f.index for f in rec.frames()]
+    assert indices == [0, 1, 3, 4]
+    assert "frame 2" in caplog.text and "cannot decode" in caplog.text
+
+
+def test_unpaired_image_is_skipped_never_paired_wrongly(tmp_path, caplog):
+    path = helpers.write(tmp_path / "unpaired.mcap", n=5, unpaired_right=(1,))
+    with caplog.at_level(logging.WARNING), Recording(path) as rec:
+        frames = list(rec.frames())
+    assert [f.timestamp_ns for f in frames] == [helpers.T0 + i * helpers.PERIOD for i in (0, 2, 3, 4)]
+    for f in frames:
+        i = (f.timestamp_ns - helpers.T0) // helpers.PERIOD
+        assert np.array_equal(f.left, helpers.image(i)) and np.array_equal(f.right, helpers.image(i + 100))
+    assert caplog.text.count("has no partner") == 2
+
+
+def test_pose_out_of_range_and_invalid_quaternion(tmp_path):
+    quats = [(0, 0, 0, 1), (0, 0, 0, 0), (0, 0, 0, 1), (np.nan, 0, 0, 1), (0, 0, 0, 1)]
+    times = [helpers.T0 + i * helpers.PERIOD for i in range(5)]
+    path = helpers.write(tmp_path / "badtf.mcap", n=7, tf_quats=quats, tf_times=times)
+    with Recording(path) as rec:
+        problems = {f.index: f.pose_problem for f in rec.frames()}
+    assert problems[0] is None and problems[2] is None and problems[4] is None
+    assert "invalid quaternion" in problems[1] and "invalid quaternion" in problems[3]
+    assert "outside the transform samples" in problems[5] and "outside" in problems[6]
+
+
+def test_frame_range_streams_only_the_asked_frames(small_recording):
+    with Recording(small_recording) as rec:
+        assert [f.index for f in rec.frames(2, 4)] == [2, 3]
+
+
+def broken_files(tmp_path):
+    good = helpers.write(tmp_path / "good.mcap")
+    data = open(good, "rb").read()
+    cases = {}
+    (tmp_path / "empty.mcap").write_bytes(b"")
+    cases["empty"] = (tmp_path / "empty.mcap", "empty file")
+    (tmp_path / "trunc.mcap").write_bytes(data[: len(data) // 2])
+    cases["truncated"] = (tmp_path / "trunc.mcap", "truncated")
+    (tmp_path / "text.mcap").write_text("hello, not a recording\n")
+    cases["not mcap"] = (tmp_path / "text.mcap", "not an MCAP file")
+    cases["no right"] = (helpers.write(tmp_path / "noright.mcap", skip_topics=("/stereo/right/image",)),
+                         "missing topic /stereo/right/image")
+    cases["no calibration"] = (helpers.write(tmp_path / "nocal.mcap", skip_topics=("/stereo/left/calibration",)),
+                               "missing topic /stereo/left/calibration")
+    cases["no tf"] = (helpers.write(tmp_path / "notf.mcap", skip_topics=("/tf",)), "missing topic /tf")
+    cases["missing file"] = (tmp_path / "absent.mcap", "no such file")
+    return cases
+
+
+@pytest.mark.parametrize("case", ["empty", "truncated", "not mcap", "no right", "no calibration", "no tf",
+                                  "missing file"])
+def test_whole_file_problems_raise_one_line(tmp_path, case):
+    path, message = broken_files(tmp_path)[case]
+    with pytest.raises(RecordingError, match=message) as info:
+        Recording(str(path))
+    assert "\n" not in str(info.value) and str(path) in str(info.value)
+
+
+def test_no_path_to_object_frame(tmp_path):
+    path = helpers.write(tmp_path / "good.mcap")
+    with pytest.raises(RecordingError, match="no transform path from 'camera_left' to 'board'"):
+        Recording(path, object_frame="board")
+
+
+def test_writer_is_atomic(tmp_path):
+    target = tmp_path / "partial.mcap"
+    with pytest.raises(RuntimeError):
+        with RecordingWriter(target) as w:
+            w.image("/stereo/left/image", helpers.image(0), 0, "camera_left")
+            raise RuntimeError("interrupted")
+    assert not target.exists() and not list(tmp_path.iterdir())
