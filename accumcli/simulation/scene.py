@@ -183,15 +183,18 @@ def make_background(rng: np.random.Generator, fov_half_width: float) -> Part:
 
 def trajectory(k: np.ndarray, phase: float, per_frame_deg: float = 10.0) -> np.ndarray:
     """(len(k), 4, 4) poses ``T_camera_object`` at frame times ``k`` (frame units,
-    fractional allowed; ``phase`` in radians picks the recording's start). The object is about 0.5 m in front
-    of the camera, swinging about its vertical axis (+-60 deg) and tilting
-    (+-30 deg) so that consecutive frames differ by 5 to 15 degrees and the
-    aspects repeat about every 30 frames."""
-    omega = np.radians(per_frame_deg) / np.radians(45.0)  # mean angular speed ~ per_frame_deg
+    fractional allowed; ``phase`` in radians picks the recording's start).
+
+    The object, about 0.5 m in front of the camera, swings about its vertical
+    axis (+-55 deg), tilts (+-25 deg) and rolls (+-30 deg, so that edges leave
+    the critical plane), moving 5 to 15 degrees between frames; the aspects
+    repeat about every 30 frames.
+    """
+    omega = np.radians(per_frame_deg) / np.radians(45.0)
     k = np.asarray(k, float)
-    yaw = np.radians(60.0) * np.sin(omega * k + phase)
-    pitch = np.radians(28.0) * np.cos(omega * k + phase) - np.radians(12.0)
-    roll = np.radians(8.0) * np.sin(0.37 * omega * k)
+    yaw = np.radians(55.0) * np.sin(omega * k + phase)
+    pitch = np.radians(25.0) * np.cos(omega * k + phase) - np.radians(10.0)
+    roll = np.radians(30.0) * np.sin(0.6 * omega * k + 2.0 * phase)
     rotations = Rotation.from_euler("yxz", np.column_stack([yaw, pitch, roll])).as_matrix()
     translations = np.column_stack([0.03 * np.sin(0.5 * omega * k), 0.02 * np.cos(0.41 * omega * k) + 0.01,
                                     0.5 + 0.04 * np.sin(0.29 * omega * k)])

@@ -137,8 +137,13 @@ def _visible(points_cam: np.ndarray, tangents_cam: np.ndarray, camera: PinholeCa
 
 
 def simulate(output: str, options: SimulationOptions = SimulationOptions(), topics: Topics = Topics(),
-             truth_output: str | None = None, progress=None) -> SimulationResult:
-    """Render and write ``output`` (.mcap) and its truth sidecar (``NAME.truth.json``)."""
+             truth_output: str | None = None, progress=None, visibility: list | None = None) -> SimulationResult:
+    """Render and write ``output`` (.mcap) and its truth sidecar (``NAME.truth.json``).
+
+    ``progress(frames_done)`` is called after each frame; if ``visibility`` is a
+    list, each frame's (S,) bool array of visible edge samples (in the truth's
+    sample order) is appended to it, for measuring single stages per frame.
+    """
     o = options
     if o.shape not in SHAPES:
         raise ValueError(f"unknown shape {o.shape!r}")
@@ -200,6 +205,8 @@ def simulate(output: str, options: SimulationOptions = SimulationOptions(), topi
                 image = finish_image(clean, gain, o.blur_sigma, o.noise_sigma, rng)
                 writer.image(getattr(topics, f"{side}_image"), image, int(t_ns), f"camera_{side}", o.encoding)
             seen += visible
+            if visibility is not None:
+                visibility.append(visible)
             if progress:
                 progress(i + 1)
     truth = _truth_document(o, edges, samples, owner, seen, image_times, truth_poses, camera)

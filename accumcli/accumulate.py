@@ -1,0 +1,232 @@
+"""The paper's accumulation scheme (section 2.1), independent of the entity type.
+
+An entity type supplies a distance with thresholds (``correspondences``), a
+rigid transform (``transform``), a merge (``merge``) and, beyond the paper, a
+test of which model entities the current frame should have observed
+(``expected``). The core keeps, per model entity, a confidence in log-odds,
+the number of frames that confirmed it, and when it was last confirmed.
+
+Update rule per frame, for observed entities brought into the model's frame
+by the known motion (the entity type's ``transform``):
+
+1. Correspondences between model and observation by the entity's metric.
+2. Every model entity with a corresponding observation is confirmed:
+   ``L += log(p_detect / p_false)``. Merging is one-to-one (mutually best
+   pairs, in rounds, by ascending cost): each observation is averaged into one
+   model entity. Confirming is not: local entities are cut anew in every frame
+   (an edge may be four pieces in the model and three in a frame), and a piece
+   whose stretch was observed must not be punished for the cut.
+3. Model entities the frame should have observed (``expected``) but did not
+   are weakened: ``L += log((1 - p_detect) / (1 - p_false))``. Entities
+   that could not have been observed keep their confidence: an edge that
+   turned out of view, or behind the object, is not punished.
+4. Unmatched observations join the model with confidence ``initial``.
+5. Model entities that duplicate each other (the entity type's ``duplicates``)
+   are merged: they would otherwise compete for the same observations.
+6. Entities below ``floor`` are pruned, and so are tentative ones
+   (confidence < 0.5) not confirmed for ``tentative_frames`` frames, which
+   bounds the model's size on long recordings.
+
+The log-odds L of confidence c is ``log(c / (1 - c))``, clamped to
+``ceiling``. With the defaults a new entity (0.2) is accepted (>= 0.5) at its
+second confirmation, i.e. after three observations, and falls to the floor
+after two expected misses.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Generic, Protocol, TypeVar
+
+import numpy as np
+
+E = TypeVar("E")
+
+
+class EntityType(Protocol[E]):
+    """What the core needs of an entity type. Entities are a struct of arrays (first axis N)."""
+
+    def size(self, entities: E) -> int: ...
+
+    def select(self, entities: E, index: np.ndarray) -> E: ...
+
+    def concatenate(self, first: E, second: E) -> E: ...
+
+    def transform(self, entities: E, T_new_old: np.ndarray) -> E: ...
+
+    def correspondences(self, model: E, observed: E) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(model index, observed index, cost) of all pairs within the metric's thresholds."""
+
+    def merge(self, model: E, observed: E, model_index: np.ndarray, observed_index: np.ndarray,
+              context: Any) -> E:
+        """The model with entities ``model_index`` merged with their observations."""
+
+    def observe(self, observed: E, context: Any) -> E:
+        """Observed entities made ready to join the model (e.g. per-entity state initialised)."""
+
+    def expected(self, model: E, context: Any) -> np.ndarray:
+        """(N,) bool: the frame described by ``context`` should have observed these entities."""
+
+    def duplicates(self, model: E) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(i, j, cost) of model entities that describe the same thing (stricter than
+        ``correspondences``, which must tolerate an observation's noise)."""
+
+
+def logit(p: float) -> float:
+    return float(np.log(p / (1.0 - p)))
+
+
+@dataclass(frozen=True)
+class UpdateRule:
+    p_detect: float = 0.6      # an entity of the object that the frame should show is extracted
+    p_false: float = 0.2       # something is extracted there although the entity is not real
+    initial: float = 0.2       # confidence of a new entity
+    floor: float = 0.1         # pruned below
+    ceiling: float = 0.995
+    tentative_frames: int = 6  # a tentative entity unconfirmed this long is pruned
+
+    @property
+    def hit(self) -> float:
+        return float(np.log(self.p_detect / self.p_false))
+
+    @property
+    def miss(self) -> float:
+        return float(np.log((1 - self.p_detect) / (1 - self.p_false)))
+
+
+@dataclass
+class StepStats:
+    """What one update did (counts)."""
+
+    observed: int
+    confirmed: int
+    missed: int
+    new: int
+    pruned: int
+    merged: int
+    size: int
+    accepted: int
+
+
+def one_to_one(a: np.ndarray, b: np.ndarray, cost: np.ndarray, rounds: int = 4) -> np.ndarray:
+    """Indices of pairs (a[k], b[k]) forming a one-to-one matching, by ascending cost.
+
+    Each round keeps the pairs that are the cheapest for both their a and their
+    b, then drops every pair touching a kept a or b; a few rounds recover
+    nearly all of the greedy matching without a Python loop over pairs.
+    """
+    chosen = []
+    alive = np.arange(len(a))
+    for _ in range(rounds):
+        if len(alive) == 0:
+            break
+        aa, bb, cc = a[alive], b[alive], cost[alive]
+        best_a = _cheapest(aa, cc)
+        best_b = _cheapest(bb, cc)
+        mutual = np.zeros(len(alive), bool)
+        mutual[np.intersect1d(best_a, best_b)] = True
+        chosen.append(alive[mutual])
+        used_a = np.isin(aa, aa[mutual])
+        used_b = np.isin(bb, bb[mutual])
+        alive = alive[~(used_a | used_b)]
+    return np.concatenate(chosen) if chosen else np.zeros(0, np.int64)
+
+
+def _cheapest(keys: np.ndarray, cost: np.ndarray) -> np.ndarray:
+    order = np.lexsort((cost, keys))
+    first = np.ones(len(order), bool)
+    first[1:] = keys[order][1:] != keys[order][:-1]
+    return order[first]
+
+
+class Accumulator(Generic[E]):
+    """A model of entities with confidences, updated frame by frame."""
+
+    def __init__(self, entity_type: EntityType[E], empty: E, rule: UpdateRule = UpdateRule()):
+        self.type = entity_type
+        self.rule = rule
+        self.entities = empty
+        self.log_odds = np.zeros(0)
+        self.observations = np.zeros(0, np.int64)
+        self.last_confirmed = np.zeros(0, np.int64)
+        self.frame = 0
+
+    @property
+    def confidence(self) -> np.ndarray:
+        return 1.0 / (1.0 + np.exp(-self.log_odds))
+
+    def __len__(self) -> int:
+        return len(self.log_odds)
+
+    def update(self, observed: E, T_model_observed: np.ndarray, context: Any = None) -> StepStats:
+        """Accumulate one frame's ``observed`` entities, given in their sensor's frame;
+        ``T_model_observed`` (the known motion) maps them into the model's frame."""
+        rule, T = self.rule, self.type
+        observed = T.observe(T.transform(observed, T_model_observed), context)
+        n_model, n_obs = len(self), T.size(observed)
+        all_mi, all_oi, cost = T.correspondences(self.entities, observed)
+        keep = one_to_one(all_mi, all_oi, cost)
+        mi, oi = all_mi[keep], all_oi[keep]
+        expected = T.expected(self.entities, context) if n_model else np.zeros(0, bool)
+        confirmed = np.zeros(n_model, bool)
+        confirmed[all_mi] = True
+        missed = expected & ~confirmed
+        if len(mi):
+            self.entities = T.merge(self.entities, observed, mi, oi, context)
+        self.log_odds = np.minimum(self.log_odds + rule.hit * confirmed + rule.miss * missed, logit(rule.ceiling))
+        self.observations = self.observations + confirmed
+        self.last_confirmed = np.where(confirmed, self.frame, self.last_confirmed)
+        # new entities
+        fresh = np.ones(n_obs, bool)
+        fresh[oi] = False
+        n_new = int(fresh.sum())
+        if n_new:
+            self.entities = T.concatenate(self.entities, T.select(observed, np.flatnonzero(fresh)))
+            self.log_odds = np.concatenate([self.log_odds, np.full(n_new, logit(rule.initial))])
+            self.observations = np.concatenate([self.observations, np.ones(n_new, np.int64)])
+            self.last_confirmed = np.concatenate([self.last_confirmed, np.full(n_new, self.frame)])
+        n_merged = self._consolidate()
+        # pruning
+        confidence = self.confidence
+        stale = (confidence < 0.5) & (self.frame - self.last_confirmed >= rule.tentative_frames)
+        alive = (confidence >= rule.floor) & ~stale
+        n_pruned = int((~alive).sum())
+        if n_pruned:
+            index = np.flatnonzero(alive)
+            self.entities = T.select(self.entities, index)
+            self.log_odds, self.observations = self.log_odds[index], self.observations[index]
+            self.last_confirmed = self.last_confirmed[index]
+        self.frame += 1
+        return StepStats(observed=n_obs, confirmed=int(confirmed.sum()), missed=int(missed.sum()), new=n_new, pruned=n_pruned,
+                         merged=n_merged, size=len(self), accepted=int((self.confidence >= 0.5).sum()))
+
+    def _consolidate(self) -> int:
+        """Merge model entities that correspond to each other (one-to-one, by the entity
+        metric): the more confident one absorbs the other, keeping the larger
+        confidence and the sum of observations. Without this, a duplicate would
+        take the observations of the entity it doubles (correspondences are
+        one-to-one) and both would be punished in turn."""
+        i, j, cost = self.type.duplicates(self.entities)
+        distinct = i != j
+        i, j, cost = i[distinct], j[distinct], cost[distinct]
+        if len(i) == 0:
+            return 0
+        keep = one_to_one(i, j, cost)
+        i, j = i[keep], j[keep]
+        stronger = self.log_odds[i] >= self.log_odds[j]
+        winner, loser = np.where(stronger, i, j), np.where(stronger, j, i)
+        winner_unique = ~np.isin(winner, loser)  # a chain a <- b <- c waits for the next frame
+        winner, loser = winner[winner_unique], loser[winner_unique]
+        if len(winner) == 0:
+            return 0
+        self.entities = self.type.merge(self.entities, self.entities, winner, loser, None)
+        self.log_odds[winner] = np.maximum(self.log_odds[winner], self.log_odds[loser])
+        self.observations[winner] += self.observations[loser]
+        self.last_confirmed[winner] = np.maximum(self.last_confirmed[winner], self.last_confirmed[loser])
+        alive = np.ones(len(self), bool)
+        alive[loser] = False
+        index = np.flatnonzero(alive)
+        self.entities = self.type.select(self.entities, index)
+        self.log_odds, self.observations = self.log_odds[index], self.observations[index]
+        self.last_confirmed = self.last_confirmed[index]
+        return len(loser)

@@ -1,0 +1,164 @@
+"""Measuring models, single-frame extractions and poses against a truth sidecar.
+
+Definitions (issue 4, used for every figure accum reports):
+- a segment is *correct* if its centre lies within ``position_tol`` (4 mm) of a
+  truth edge (as a finite segment) and its direction is within ``angle_tol``
+  (10 degrees) of that edge;
+- *precision* is the fraction of evaluated segments that are correct;
+- *background* is the fraction farther than ``background_dist`` (20 mm) from
+  every truth edge;
+- *completeness* is the fraction of truth edge length that is covered by a
+  correct segment, taken as a finite segment of its length: an edge sample is
+  covered when its projection on the segment's line falls within half the
+  segment's length of the centre and lies within ``position_tol`` of it. Only
+  samples seen in at least ``min_seen`` frames count (the truth's ``seen``
+  counts; an edge without them counts wholly, sampled every 2 mm), and edges
+  marked ``"completeness": false`` do not count.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .geometry import invert, pose_error
+from .model_io import Truth
+from .segments import Segments
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    position_tol: float = 0.004
+    angle_tol_deg: float = 10.0
+    background_dist: float = 0.020
+    min_seen: int = 3
+    sample_spacing: float = 0.002
+
+
+@dataclass
+class EdgeSamples:
+    """Truth edges a, b (E, 3) (object frame) and their samples: points (S, 3), edge (S,), counted (S,)."""
+
+    a: np.ndarray
+    b: np.ndarray
+    points: np.ndarray
+    edge: np.ndarray
+    counted: np.ndarray
+
+    @classmethod
+    def of(cls, truth: Truth, tol: Tolerances = Tolerances()) -> "EdgeSamples":
+        points, owner, counted = [], [], []
+        for i, (a, b, seen, use) in enumerate(zip(truth.a, truth.b, truth.seen, truth.for_completeness)):
+            k = len(seen) if seen is not None and len(seen) else max(2, int(np.ceil(np.linalg.norm(b - a) /
+                                                                                    tol.sample_spacing)))
+            s = (np.arange(k) + 0.5) / k
+            points.append(a + s[:, None] * (b - a))
+            owner.append(np.full(k, i))
+            ok = np.full(k, bool(use))
+            if seen is not None and len(seen):
+                ok &= np.asarray(seen) >= tol.min_seen
+            counted.append(ok)
+        return cls(truth.a, truth.b, np.concatenate(points), np.concatenate(owner), np.concatenate(counted))
+
+
+def _point_edge_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distances (N, E) from points (N, 3) to finite edges a, b (E, 3)."""
+    ab = b - a
+    t = np.clip(np.einsum("nek,ek->ne", p[:, None, :] - a[None], ab) / np.sum(ab * ab, axis=1), 0.0, 1.0)
+    closest = a[None] + t[..., None] * ab[None]
+    return np.linalg.norm(p[:, None, :] - closest, axis=2)
+
+
+def classify(segments: Segments, edges: EdgeSamples, tol: Tolerances = Tolerances()):
+    """Per segment (object frame): distance to the nearest edge (N,), correct (N,) bool, and the
+    (N, E) bool matrix of edges each segment is correct for."""
+    if len(segments) == 0:
+        return np.zeros(0), np.zeros(0, bool), np.zeros((0, len(edges.a)), bool)
+    distance = np.concatenate([_point_edge_distance(chunk, edges.a, edges.b)
+                               for chunk in np.array_split(segments.centers, max(1, len(segments) // 2000))])
+    edge_dir = (edges.b - edges.a) / np.linalg.norm(edges.b - edges.a, axis=1, keepdims=True)
+    cos = np.abs(segments.directions @ edge_dir.T)
+    correct_for = (distance <= tol.position_tol) & (cos >= np.cos(np.radians(tol.angle_tol_deg)))
+    return distance.min(axis=1), correct_for.any(axis=1), correct_for
+
+
+def covered_samples(segments: Segments, correct_for: np.ndarray, edges: EdgeSamples,
+                    tol: Tolerances = Tolerances()) -> np.ndarray:
+    """(S,) bool: edge samples covered by a segment that is correct for the sample's edge."""
+    covered = np.zeros(len(edges.points), bool)
+    good = np.flatnonzero(correct_for.any(axis=1))
+    if len(good) == 0:
+        return covered
+    tree = cKDTree(edges.points)
+    radius = segments.lengths[good].max() / 2 + tol.position_tol
+    pairs = cKDTree(segments.centers[good]).sparse_distance_matrix(tree, radius, output_type="ndarray")
+    k, s = good[pairs["i"]], pairs["j"]
+    rel = edges.points[s] - segments.centers[k]
+    along = np.sum(rel * segments.directions[k], axis=1)
+    across = np.linalg.norm(rel - along[:, None] * segments.directions[k], axis=1)
+    hit = (np.abs(along) <= segments.lengths[k] / 2) & (across <= tol.position_tol) & correct_for[k, edges.edge[s]]
+    covered[s[hit]] = True
+    return covered
+
+
+@dataclass
+class SegmentScores:
+    segments: int
+    precision: float
+    completeness: float
+    background: float
+
+    def as_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+def score_segments(segments: Segments, edges: EdgeSamples, tol: Tolerances = Tolerances()) -> SegmentScores:
+    """Precision, completeness and background of ``segments`` (object frame)."""
+    distance, correct, correct_for = classify(segments, edges, tol)
+    covered = covered_samples(segments, correct_for, edges, tol)
+    n = max(len(segments), 1)
+    return SegmentScores(len(segments), float(correct.sum() / n) if len(segments) else float("nan"),
+                         float(covered[edges.counted].mean()) if edges.counted.any() else float("nan"),
+                         float((distance > tol.background_dist).sum() / n) if len(segments) else float("nan"))
+
+
+def evaluate_model(model: Segments, truth: Truth, tol: Tolerances = Tolerances()) -> dict:
+    """Scores of a model's accepted segments (confidence >= 0.5) against the truth."""
+    edges = EdgeSamples.of(truth, tol)
+    accepted = model.select(model.accepted)
+    scores = score_segments(accepted, edges, tol).as_dict()
+    return {"segments": len(model), "accepted": scores.pop("segments"), **scores}
+
+
+def frame_accuracy(segments_camera: Segments, T_camera_object: np.ndarray, edges: EdgeSamples,
+                   tol: Tolerances = Tolerances()) -> dict:
+    """Single-frame figures: the fraction of segments near the object (within the background distance)
+    that are correct, completeness of all segments, and the background fraction."""
+    segments = segments_camera.transformed(invert(T_camera_object), "object")
+    distance, correct, correct_for = classify(segments, edges, tol)
+    near = distance <= tol.background_dist
+    covered = covered_samples(segments, correct_for, edges, tol)
+    return {"segments": len(segments), "near_object": int(near.sum()), "correct_near": int((correct & near).sum()),
+            "completeness": float(covered[edges.counted].mean()) if edges.counted.any() else float("nan"),
+            "background": int((~near).sum())}
+
+
+def pose_errors(times_ns: np.ndarray, poses: np.ndarray, status: list, truth: Truth) -> dict:
+    """Median and max rotation (deg) and translation (mm) errors of tracked poses, and the tracked fraction."""
+    rot, trans, tracked = [], [], 0
+    for t_ns, T, st in zip(times_ns, poses, status):
+        T_true = truth.pose_at(int(t_ns))
+        if T_true is None or st != "tracked" or not np.isfinite(T).all():
+            continue
+        tracked += 1
+        r, t = pose_error(T, T_true)
+        rot.append(r)
+        trans.append(t * 1000)
+    n = max(len(times_ns), 1)
+    stats = {"frames": len(times_ns), "tracked_fraction": tracked / n}
+    for name, values in (("rotation_deg", rot), ("translation_mm", trans)):
+        stats[f"median_{name}"] = float(np.median(values)) if values else float("nan")
+        stats[f"max_{name}"] = float(np.max(values)) if values else float("nan")
+    return stats

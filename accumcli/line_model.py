@@ -1,0 +1,193 @@
+"""Local 3D line segments as an entity type of the accumulation core.
+
+Entities are ``Segments`` in the object frame with running sums in ``extra``:
+
+- position in information form: ``info`` (N, 3, 3), 1/m^2, and ``info_vec``
+  (N, 3); the centre is ``info^-1 info_vec``. One observation's covariance is
+  ``sigma_lat^2 I + (sigma_depth^2 - sigma_lat^2) r r^T + (length^2 / 12) u u^T``
+  (r the viewing ray, u the direction): depth is the weak direction of stereo,
+  and along the segment its position is arbitrary (the aperture problem). The
+  merge is thus a weighted average that trusts each view where it is precise,
+  each view weighted by its match confidence;
+- ``dir_sum`` (N, 3), ``len_sum`` (N,), ``weight`` (N,): confidence-weighted
+  sums of the sign-aligned directions and of the lengths;
+- ``view_sum`` (N, 3), ``view_spread`` (N,) radians: the directions (object
+  frame) from which the segment was confirmed, as their sum and the cone's
+  half-angle.
+
+Running sums are scaled down once their weight passes ``max_weight``, so a
+long-lived segment still follows new evidence.
+
+``expected`` (beyond the paper): a model segment should be seen in a frame only
+if both its endpoints are in front of the camera and inside both images, it
+is not near the critical plane, and the camera looks at it from within its
+cone of confirmed views (plus ``aspect_margin_deg``). For a rigid object and
+gripper, what is visible depends on the viewing direction only, so a segment
+that turned away or behind the object is not punished.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .geometry import invert, rotate_vectors, transform_points
+from .metric import MetricThresholds, candidate_pairs
+from .recording import StereoIntrinsics
+from .segments import Segments, concatenate
+
+STATE_KEYS = ("info", "info_vec", "dir_sum", "len_sum", "weight", "view_sum", "view_spread")
+
+
+@dataclass(frozen=True)
+class LineModelParams:
+    thresholds: MetricThresholds = MetricThresholds()
+    lateral_sigma_px: float = 0.3
+    max_weight: float = 20.0
+    aspect_margin_deg: float = 15.0
+    critical_angle_deg: float = 12.0
+    image_margin_px: float = 5.0
+    duplicate_shift: float = 0.25     # fraction of a length; closer centres along the line are duplicates
+
+
+@dataclass
+class FrameContext:
+    """What the entity type needs to know of the frame: the pose used and the cameras."""
+
+    T_camera_object: np.ndarray
+    intrinsics: StereoIntrinsics
+
+
+class LineSegmentType:
+    """The accumulation core's entity type for ``Segments`` (see the module docstring)."""
+
+    def __init__(self, params: LineModelParams = LineModelParams()):
+        self.params = params
+
+    def empty(self, frame_id: str) -> Segments:
+        s = Segments.empty(frame_id)
+        s.extra = {"info": np.zeros((0, 3, 3)), "info_vec": np.zeros((0, 3)), "dir_sum": np.zeros((0, 3)),
+                   "len_sum": np.zeros(0), "weight": np.zeros(0), "view_sum": np.zeros((0, 3)),
+                   "view_spread": np.zeros(0)}
+        return s
+
+    def size(self, entities: Segments) -> int:
+        return len(entities)
+
+    def select(self, entities: Segments, index) -> Segments:
+        return entities.select(index)
+
+    def concatenate(self, first: Segments, second: Segments) -> Segments:
+        return concatenate([first, second], first.frame_id)
+
+    def transform(self, entities: Segments, T_new_old: np.ndarray) -> Segments:
+        return entities.transformed(T_new_old, entities.frame_id)
+
+    def correspondences(self, model: Segments, observed: Segments):
+        return candidate_pairs(model.centers, model.directions, model.lengths, observed.centers,
+                               observed.directions, observed.lengths, self.params.thresholds)
+
+    def duplicates(self, model: Segments):
+        """Pairs of model segments within the metric's thresholds whose centres are also within
+        ``duplicate_shift`` of a length along their line: the same piece twice, not two
+        neighbouring pieces (which the paper's metric, made for noisy observations, would pair)."""
+        i, j, cost = self.correspondences(model, model)
+        along = np.abs(np.sum((model.centers[j] - model.centers[i]) * model.directions[i], axis=1))
+        same = (i != j) & (along <= self.params.duplicate_shift * np.minimum(model.lengths[i], model.lengths[j]))
+        return i[same], j[same], cost[same]
+
+    def observe(self, observed: Segments, context: FrameContext) -> Segments:
+        """Initialise the running sums of observations (already in the object frame)."""
+        p = self.params
+        camera_in_object = invert(context.T_camera_object)[:3, 3]
+        to_camera = camera_in_object - observed.centers
+        distance = np.linalg.norm(to_camera, axis=1, keepdims=True)
+        ray = to_camera / np.maximum(distance, 1e-9)
+        depth = distance[:, 0]
+        sigma_lat = depth * p.lateral_sigma_px / context.intrinsics.fx
+        sigma_depth = observed.extra.get("sigma_depth_m", sigma_lat * 10)
+        u = observed.directions
+        cov = (sigma_lat[:, None, None] ** 2 * np.eye(3)
+               + (np.maximum(sigma_depth, sigma_lat) ** 2 - sigma_lat ** 2)[:, None, None] * ray[:, :, None] *
+               ray[:, None, :] + (observed.lengths ** 2 / 12)[:, None, None] * u[:, :, None] * u[:, None, :])
+        w = np.clip(observed.confidence, 0.05, 1.0)
+        info = np.linalg.inv(cov) * w[:, None, None]
+        out = Segments(observed.frame_id, observed.centers, u, observed.lengths, observed.confidence,
+                       observed.observations)
+        out.extra = {"info": info, "info_vec": np.einsum("nij,nj->ni", info, observed.centers),
+                     "dir_sum": u * w[:, None], "len_sum": observed.lengths * w, "weight": w,
+                     "view_sum": ray, "view_spread": np.zeros(len(observed))}
+        return out
+
+    def merge(self, model: Segments, observed: Segments, mi: np.ndarray, oi: np.ndarray,
+              context: FrameContext) -> Segments:
+        """Information-weighted merge of the matched pairs (model index ``mi``, observed ``oi``)."""
+        x, o = model.extra, observed.extra
+        extra = {k: v.copy() for k, v in x.items()}
+        scale = np.minimum(1.0, self.params.max_weight / np.maximum(x["weight"][mi], 1e-9))
+        for key in ("info", "info_vec", "dir_sum", "len_sum", "weight"):
+            shape = (-1,) + (1,) * (x[key].ndim - 1)
+            extra[key][mi] = x[key][mi] * scale.reshape(shape)
+        sign = np.where(np.sum(model.directions[mi] * observed.directions[oi], axis=1) >= 0, 1.0, -1.0)
+        extra["info"][mi] += o["info"][oi]
+        extra["info_vec"][mi] += o["info_vec"][oi]
+        extra["dir_sum"][mi] += o["dir_sum"][oi] * sign[:, None]
+        extra["len_sum"][mi] += o["len_sum"][oi]
+        extra["weight"][mi] += o["weight"][oi]
+        old_view = _unit(x["view_sum"][mi])
+        extra["view_sum"][mi] += o["view_sum"][oi]
+        new_view = _unit(extra["view_sum"][mi])
+        extra["view_spread"][mi] = np.maximum(x["view_spread"][mi] + _angle(old_view, new_view),
+                                              _angle(o["view_sum"][oi], new_view))
+        centers = model.centers.copy()
+        centers[mi] = np.linalg.solve(extra["info"][mi], extra["info_vec"][mi][:, :, None])[:, :, 0]
+        directions = model.directions.copy()
+        directions[mi] = _unit(extra["dir_sum"][mi])
+        lengths = model.lengths.copy()
+        lengths[mi] = extra["len_sum"][mi] / extra["weight"][mi]
+        return Segments(model.frame_id, centers, directions, lengths, model.confidence, model.observations, extra)
+
+    def expected(self, model: Segments, context: FrameContext) -> np.ndarray:
+        """(N,) bool: the frame should have shown these model segments (see the module docstring)."""
+        p, intr = self.params, context.intrinsics
+        T = context.T_camera_object
+        ends = transform_points(T, model.endpoints().reshape(-1, 3))
+        uv_left, uv_right, z = intr.project(ends)
+        m = p.image_margin_px
+        inside = (z > 0.05)
+        for uv in (uv_left, uv_right):
+            inside &= (uv[:, 0] >= m) & (uv[:, 0] <= intr.width - 1 - m) & (uv[:, 1] >= m) & \
+                      (uv[:, 1] <= intr.height - 1 - m)
+        inside = inside.reshape(-1, 2).all(axis=1)
+        d2 = (uv_left[1::2] - uv_left[0::2])
+        angle = np.degrees(np.arctan2(np.abs(d2[:, 1]), np.abs(d2[:, 0])))
+        not_critical = angle >= p.critical_angle_deg + 3.0
+        camera_in_object = invert(T)[:3, 3]
+        view = _unit(camera_in_object - model.centers)
+        in_aspect = _angle(view, _unit(model.extra["view_sum"])) <= model.extra["view_spread"] + np.radians(
+            p.aspect_margin_deg)
+        return inside & not_critical & in_aspect
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
+
+
+def _angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.arccos(np.clip(np.sum(_unit(a) * _unit(b), axis=-1), -1.0, 1.0))
+
+
+def to_model(entities: Segments, confidence: np.ndarray, observations: np.ndarray) -> Segments:
+    """The model as written to files: segments with confidence and observation count, and
+    per segment its mean viewing direction, cone half-angle (degrees) and the standard deviation
+    of its position across its direction (m)."""
+    extra = entities.extra
+    covariance = np.linalg.inv(extra["info"]) if len(entities) else np.zeros((0, 3, 3))
+    u = entities.directions
+    across = np.trace(covariance, axis1=1, axis2=2) - np.einsum("ni,nij,nj->n", u, covariance, u)
+    return Segments(entities.frame_id, entities.centers, entities.directions, entities.lengths,
+                    np.asarray(confidence, float), np.asarray(observations, np.int64),
+                    {"view_direction": _unit(extra["view_sum"]), "view_spread_deg": np.degrees(extra["view_spread"]),
+                     "sigma_m": np.sqrt(np.maximum(across, 0) / 2)})

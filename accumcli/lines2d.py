@@ -1,0 +1,425 @@
+"""2D local line segments in one rectified image (the paper's section 2.2.1).
+
+A local segment exists where there is *global support* (it lies on a line of
+an orientation-sensitive Hough transform) *and local support* (along that line
+the gradient is strong and its orientation agrees with the line's normal):
+
+1. Gradients: Sobel on the slightly blurred image, in grey levels per pixel.
+   Edge pixels are Canny's (non-maximum suppressed, hysteresis); each is moved
+   to sub-pixel position by a parabola through the gradient magnitude along
+   the gradient direction.
+2. Hough: every edge pixel votes, weighted by its gradient magnitude and a
+   triangular kernel, only for line normals within ``vote_window_deg`` of its
+   own gradient orientation (undirected: normal angles in [0, 180), the
+   rho axis mirrored at the wrap). Peaks are local maxima of the accumulator.
+3. Each edge pixel joins the candidate line nearest to it among the peaks its
+   own votes landed near. A line's pixels are fitted (weighted total least
+   squares); along it, runs of supporting pixels (same polarity, small gaps)
+   are cut into pieces of ``segment_length_px`` that span the run. A run needs
+   ``min_fill`` of the pixels a full edge of its orientation gives on the
+   pixel grid. Each piece is a local segment; its centre and orientation are
+   the weighted total-least-squares fit of its sub-pixel edge points.
+
+``detect_lsd`` is the alternative detector: OpenCV's line segment detector,
+whose segments are cut into the same local segments (the paper names Hough's
+weakness on short segments).
+
+Pixel coordinates are (u, v) = (column, row), origin at the centre of the
+top-left pixel.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+
+@dataclass(frozen=True)
+class LineParams:
+    """Parameters of 2D extraction (defaults suit 640x480 8-bit images)."""
+
+    segment_length_px: float = 15.0
+    blur_sigma: float = 1.0
+    tensor_sigma: float = 1.5         # smoothing of the structure tensor that orients the votes
+    gradient_threshold: float = 3.0   # grey levels per pixel, Canny's high threshold (low = half)
+    angle_step_deg: float = 1.0       # Hough normal-angle bin
+    vote_window_deg: float = 3.0      # each pixel votes within +- this of its own orientation
+    min_line_support_px: float = 12.0  # a Hough peak needs this many pixels' worth of threshold-strength votes
+    max_lines: int = 600              # per pass
+    hough_passes: int = 3
+    min_fill: float = 0.6
+    max_line_distance_px: float = 1.5  # pixels farther from their fitted line are dropped
+    max_gap_px: float = 3.0           # a longer gap along a line ends a run of support
+    end_extension_px: float = 1.5     # pieces reach this far beyond a run's first and last pixel
+    detector: str = "hough"
+
+
+@dataclass
+class Segments2D:
+    """Local 2D line segments of one image.
+
+    centers: (N, 2) float64 px (u, v); directions: (N, 2) unit, angle in
+    [0, 180) degrees (v grows downwards); lengths: (N,) px; polarity: (N,)
+    int8, the gradient points along +normal (1) or -normal (-1), normal =
+    (-dv, du); contrast: (N,) mean gradient magnitude, grey levels per pixel;
+    line_id: (N,) int, the Hough (or LSD) line the segment lies on; t: (N,)
+    position along that line, px.
+    """
+
+    centers: np.ndarray
+    directions: np.ndarray
+    lengths: np.ndarray
+    polarity: np.ndarray
+    contrast: np.ndarray
+    line_id: np.ndarray
+    t: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.centers)
+
+    def select(self, index) -> "Segments2D":
+        return Segments2D(*(getattr(self, f)[index] for f in self.__dataclass_fields__))
+
+    @property
+    def normals(self) -> np.ndarray:
+        return np.column_stack([-self.directions[:, 1], self.directions[:, 0]])
+
+    def endpoints(self) -> np.ndarray:
+        """(N, 2, 2) endpoints, px."""
+        half = (self.lengths / 2)[:, None] * self.directions
+        return np.stack([self.centers - half, self.centers + half], axis=1)
+
+
+@dataclass
+class Gradients:
+    """gx, gy: (H, W) float32 grey levels per pixel; edges: (H, W) uint8 Canny mask;
+    orientation: (H, W) float32 normal angle in [0, pi) of the smoothed structure
+    tensor (steadier than a single pixel's gradient on weak edges)."""
+
+    gx: np.ndarray
+    gy: np.ndarray
+    edges: np.ndarray
+    orientation: np.ndarray
+
+    @property
+    def magnitude(self) -> np.ndarray:
+        return cv2.magnitude(self.gx, self.gy)
+
+
+@dataclass
+class StageTimes:
+    """Seconds spent per stage, accumulated over calls."""
+
+    seconds: dict = field(default_factory=dict)
+
+    def add(self, stage: str, since: float) -> float:
+        now = time.perf_counter()
+        self.seconds[stage] = self.seconds.get(stage, 0.0) + now - since
+        return now
+
+
+def gradients(image: np.ndarray, params: LineParams) -> Gradients:
+    """Sobel gradients (grey levels per pixel) and Canny edges of an (H, W) uint8 image."""
+    blurred = cv2.GaussianBlur(image, (0, 0), params.blur_sigma) if params.blur_sigma > 0 else image
+    dx = cv2.Sobel(blurred, cv2.CV_16S, 1, 0, ksize=3)
+    dy = cv2.Sobel(blurred, cv2.CV_16S, 0, 1, ksize=3)
+    high = 8.0 * params.gradient_threshold
+    edges = cv2.Canny(dx, dy, high / 2, high, L2gradient=True)
+    gx, gy = dx.astype(np.float32) / 8.0, dy.astype(np.float32) / 8.0
+    jxx, jxy, jyy = (cv2.GaussianBlur(a, (0, 0), params.tensor_sigma) for a in (gx * gx, gx * gy, gy * gy))
+    orientation = cv2.phase(jxx - jyy, 2 * jxy) / 2  # angle of the dominant gradient direction, [0, pi)
+    return Gradients(gx, gy, edges, orientation)
+
+
+def sample(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Bilinear samples of an (H, W) image at pixel coordinates x, y (any shape), as float32."""
+    shape = np.shape(x)
+    n = int(np.prod(shape))
+    width = 8192  # cv2.remap needs maps narrower than 32767
+    rows = max(1, -(-n // width))
+    maps = []
+    for values in (x, y):
+        flat = np.zeros(rows * width, np.float32)
+        flat[:n] = np.ravel(values)
+        maps.append(flat.reshape(rows, width))
+    out = cv2.remap(np.asarray(image, np.float32), maps[0], maps[1], cv2.INTER_LINEAR,
+                    borderMode=cv2.BORDER_REPLICATE)
+    return out.ravel()[:n].reshape(shape)
+
+
+@dataclass
+class EdgePoints:
+    """Edge pixels at sub-pixel positions: xy (M, 2) px; g (M, 2) gradient, grey/px; mag (M,);
+    phi (M,) normal angle in [0, pi) from the structure tensor."""
+
+    xy: np.ndarray
+    g: np.ndarray
+    mag: np.ndarray
+    phi: np.ndarray
+
+
+def edge_points(grad: Gradients) -> EdgePoints:
+    """Canny pixels moved along their gradient to the magnitude's parabolic maximum."""
+    rows, cols = np.nonzero(grad.edges)
+    gx, gy = grad.gx[rows, cols], grad.gy[rows, cols]
+    mag = np.hypot(gx, gy)
+    keep = mag > 0
+    rows, cols, gx, gy, mag = rows[keep], cols[keep], gx[keep], gy[keep], mag[keep]
+    nx, ny = gx / mag, gy / mag
+    magnitude = grad.magnitude
+    m_minus = sample(magnitude, cols - nx, rows - ny)
+    m_plus = sample(magnitude, cols + nx, rows + ny)
+    curvature = m_minus - 2 * mag + m_plus
+    offset = np.where(curvature < 0, 0.5 * (m_minus - m_plus) / np.where(curvature < 0, curvature, -1), 0.0)
+    offset = np.clip(offset, -0.5, 0.5)
+    xy = np.column_stack([cols + offset * nx, rows + offset * ny]).astype(np.float64)
+    return EdgePoints(xy, np.column_stack([gx, gy]).astype(np.float64), mag.astype(np.float64),
+                      grad.orientation[rows, cols].astype(np.float64))
+
+
+def hough_assign(points: EdgePoints, shape: tuple[int, int], params: LineParams) -> np.ndarray:
+    """(M,) Hough line label of every edge point (-1: on no line).
+
+    Peaks are 3x3 local maxima of the lightly smoothed accumulator, refined to
+    sub-bin precision by the centroid of their neighbourhood. A point's
+    candidates are the peaks near the cells its own votes fell in; it joins the
+    candidate line it lies closest to (within 2.5 px). A strong line spreads
+    over its neighbourhood in the accumulator and can hide a weak line a few
+    pixels away, so this runs ``hough_passes`` times, each over the votes of
+    the points no line has taken yet.
+    """
+    h, w = shape
+    step = np.radians(params.angle_step_deg)
+    n_phi = int(round(np.pi / step))
+    half_window = max(1, int(round(params.vote_window_deg / params.angle_step_deg)))
+    radius = int(np.ceil(np.hypot(w, h) / 2)) + 4
+    n_rho = 2 * radius + 1
+    x = points.xy[:, 0] - (w - 1) / 2.0
+    y = points.xy[:, 1] - (h - 1) / 2.0
+    phi_own = points.phi / step  # in bins
+    k = np.arange(-half_window, half_window + 1)
+    bins = np.round(phi_own)[:, None] + k  # (M, 2w+1)
+    kernel = np.clip(1.0 - np.abs(bins - phi_own[:, None]) / (half_window + 1), 0.0, None)
+    bins = np.mod(bins, n_phi).astype(np.int64)
+    table = np.arange(n_phi) * step
+    rho = np.rint(x[:, None] * np.cos(table)[bins] + y[:, None] * np.sin(table)[bins]).astype(np.int64) + radius
+    flat = bins * n_rho + rho
+    votes = kernel * points.mag[:, None]
+    labels = np.full(len(x), -1)
+    n_labels = 0
+    for _ in range(params.hough_passes):
+        free = labels < 0
+        if free.sum() < params.min_line_support_px:
+            break
+        acc = np.bincount(flat[free].ravel(), weights=votes[free].ravel(),
+                          minlength=n_phi * n_rho).reshape(n_phi, n_rho).astype(np.float32)
+        line_phi, line_rho, candidates = _hough_peaks(acc, flat[free], params, step, radius)
+        if len(line_phi) == 0:
+            break
+        c = np.maximum(candidates, 0)
+        xf, yf = x[free][:, None], y[free][:, None]
+        distance = np.abs(xf * np.cos(line_phi)[c] + yf * np.sin(line_phi)[c] - line_rho[c])
+        distance = np.where(candidates >= 0, distance, np.inf)
+        choice = np.argmin(distance, axis=1)
+        rows = np.arange(len(choice))
+        chosen = np.where(distance[rows, choice] <= 2.5, candidates[rows, choice] + n_labels, -1)
+        labels[free] = chosen
+        n_labels += len(line_phi)
+    return labels
+
+
+def _hough_peaks(acc: np.ndarray, flat: np.ndarray, params: LineParams, step: float, radius: int):
+    """Peaks of an accumulator: (phi (K,) radians, rho (K,) px) refined to sub-bin precision, and
+    for each vote in ``flat`` (M, 2w+1) the index of the peak whose neighbourhood it fell in, or -1."""
+    n_phi, n_rho = acc.shape
+    pad = 2  # phi wraps: phi + 180 is the same line with rho mirrored
+    wrapped = np.vstack([acc[-pad:, ::-1], acc, acc[:pad, ::-1]])
+    smooth = cv2.GaussianBlur(wrapped, (3, 3), 0.7)
+    is_peak = smooth == cv2.dilate(smooth, np.ones((3, 3), np.uint8))
+    is_peak[:pad] = is_peak[-pad:] = False
+    threshold = params.min_line_support_px * params.gradient_threshold
+    peak_phi, peak_rho = np.nonzero(is_peak & (smooth >= threshold))
+    order = np.argsort(-smooth[peak_phi, peak_rho])[: params.max_lines]
+    peak_phi, peak_rho = peak_phi[order], peak_rho[order]
+    n_peaks = len(peak_phi)
+    if n_peaks == 0:
+        return np.zeros(0), np.zeros(0), np.full(flat.shape, -1)
+    # sub-bin position: centroid of the 3x3 neighbourhood (in the padded, continuous array)
+    dphi, drho = np.meshgrid(np.arange(-1, 2), np.arange(-1, 2), indexing="ij")
+    rho_idx = np.clip(peak_rho[:, None] + drho.ravel(), 0, n_rho - 1)
+    weights = smooth[peak_phi[:, None] + dphi.ravel(), rho_idx]
+    total = weights.sum(axis=1)
+    line_phi = (peak_phi - pad + (weights * dphi.ravel()).sum(axis=1) / total) * step
+    line_rho = (peak_rho + (weights * drho.ravel()).sum(axis=1) / total) - radius
+    # label map: cells near a peak name it (the stronger peak where two are near)
+    cell_phi = peak_phi[:, None] - pad + np.repeat(np.arange(-1, 2), 5)[None, :]
+    cell_rho = peak_rho[:, None] + np.tile(np.arange(-2, 3), 3)[None, :]
+    wraps = (cell_phi < 0) | (cell_phi >= n_phi)
+    cell_rho = np.where(wraps, n_rho - 1 - cell_rho, cell_rho)
+    cell_phi = np.mod(cell_phi, n_phi)
+    inside = (cell_rho >= 0) & (cell_rho < n_rho)
+    rank = np.broadcast_to((n_peaks - np.arange(n_peaks))[:, None], cell_phi.shape)
+    best = np.zeros(n_phi * n_rho, np.int64)
+    np.maximum.at(best, (cell_phi * n_rho + cell_rho)[inside], rank[inside])
+    return line_phi, line_rho, np.where(best[flat] > 0, n_peaks - best[flat], -1)
+
+
+def _weighted_line_fit(index: np.ndarray, n_groups: int, xy: np.ndarray, w: np.ndarray):
+    """Per group: weight sum, centroid (G, 2), unit direction (G, 2) of a weighted TLS line fit."""
+    sw = np.bincount(index, w, n_groups)
+    safe = np.where(sw > 0, sw, 1.0)
+    mx = np.bincount(index, w * xy[:, 0], n_groups) / safe
+    my = np.bincount(index, w * xy[:, 1], n_groups) / safe
+    dx, dy = xy[:, 0] - mx[index], xy[:, 1] - my[index]
+    sxx = np.bincount(index, w * dx * dx, n_groups)
+    syy = np.bincount(index, w * dy * dy, n_groups)
+    sxy = np.bincount(index, w * dx * dy, n_groups)
+    angle = 0.5 * np.arctan2(2 * sxy, sxx - syy)
+    return sw, np.column_stack([mx, my]), np.column_stack([np.cos(angle), np.sin(angle)])
+
+
+def _canonical(directions: np.ndarray) -> np.ndarray:
+    """Directions with angle in [0, 180): dv > 0, or dv == 0 and du > 0."""
+    flip = (directions[:, 1] < 0) | ((directions[:, 1] == 0) & (directions[:, 0] < 0))
+    return np.where(flip[:, None], -directions, directions)
+
+
+def local_segments(points: EdgePoints, labels: np.ndarray, params: LineParams) -> Segments2D:
+    """Cut every labelled line into local segments (see the module docstring).
+
+    Along a line, consecutive supporting pixels (gaps up to ``max_gap_px``,
+    same polarity) form runs. A run at least ``min_fill * L`` long and filled
+    to ``min_fill`` gives ``ceil(R / L)`` pieces of length L spread evenly from
+    its first to its last pixel (overlapping a little where R is not a
+    multiple of L), so that an edge is covered to its ends; each piece is
+    fitted to the pixels nearest its centre.
+    """
+    on_line = labels >= 0
+    xy, g, mag, labels = points.xy[on_line], points.g[on_line], points.mag[on_line], labels[on_line]
+    if len(labels) == 0:
+        return _empty()
+    n_lines = int(labels.max()) + 1
+    _, line_center, line_dir = _weighted_line_fit(labels, n_lines, xy, mag)
+    line_normal = np.column_stack([-line_dir[:, 1], line_dir[:, 0]])
+    rel = xy - line_center[labels]
+    t = np.sum(rel * line_dir[labels], axis=1)
+    across = np.sum(rel * line_normal[labels], axis=1)
+    polarity = np.where(np.sum(g * line_normal[labels], axis=1) >= 0, 1, -1)
+    keep = np.abs(across) <= params.max_line_distance_px
+    xy, mag, labels, t, polarity = xy[keep], mag[keep], labels[keep], t[keep], polarity[keep]
+    order = np.lexsort((t, polarity, labels))
+    xy, mag, labels, t, polarity = xy[order], mag[order], labels[order], t[order], polarity[order]
+    # runs of supporting pixels
+    L = params.segment_length_px
+    brk = np.ones(len(t), bool)
+    brk[1:] = (labels[1:] != labels[:-1]) | (polarity[1:] != polarity[:-1]) | (np.diff(t) > params.max_gap_px)
+    run = np.cumsum(brk) - 1
+    n_runs = int(run[-1]) + 1
+    t_lo = np.full(n_runs, np.inf)
+    t_hi = np.full(n_runs, -np.inf)
+    np.minimum.at(t_lo, run, t)
+    np.maximum.at(t_hi, run, t)
+    run_length = t_hi - t_lo + 1.0
+    count_run = np.bincount(run, minlength=n_runs)
+    run_line = labels[brk]
+    fill = count_run / (run_length * np.max(np.abs(line_dir[run_line]), axis=1))
+    # Canny and the vote lose a pixel or two where edges meet: let the pieces reach past the run's ends
+    t_lo, run_length = t_lo - params.end_extension_px, run_length + 2 * params.end_extension_px
+    long_enough = (run_length >= params.min_fill * L) & (fill >= params.min_fill)
+    pieces = np.where(long_enough, np.ceil(run_length / L), 0).astype(np.int64)
+    # piece centres evenly from the run's first to its last pixel (overlapping slightly when needed)
+    first_center = t_lo + np.minimum(L, run_length) / 2 - 0.5
+    spacing = np.where(pieces > 1, (run_length - L) / np.maximum(pieces - 1, 1), 0.0)
+    piece = np.clip(np.round((t - first_center[run]) / np.where(spacing[run] > 0, spacing[run], 1.0)), 0,
+                    np.maximum(pieces[run] - 1, 0)).astype(np.int64)
+    has_piece = pieces[run] > 0
+    first_piece = np.cumsum(pieces) - pieces
+    group = (first_piece[run] + piece)[has_piece]
+    n_groups = int(pieces.sum())
+    if n_groups == 0:
+        return _empty()
+    xy_k, mag_k, line_k = xy[has_piece], mag[has_piece], labels[has_piece]
+    sw, centers, directions = _weighted_line_fit(group, n_groups, xy_k, mag_k)
+    count = np.bincount(group, minlength=n_groups)
+    group_line = np.zeros(n_groups, np.int64)
+    group_line[group] = line_k
+    group_polarity = np.zeros(n_groups, np.int64)
+    group_polarity[group] = polarity[has_piece]
+    agree = np.abs(np.sum(directions * line_dir[group_line], axis=1)) >= np.cos(
+        np.radians(2 * params.vote_window_deg))
+    ok = (count >= 3) & agree
+    directions = _canonical(directions[ok])
+    own_normal = np.column_stack([-directions[:, 1], directions[:, 0]])
+    sign = np.sign(np.sum(own_normal * line_normal[group_line[ok]], axis=1))
+    seg_t = np.sum((centers[ok] - line_center[group_line[ok]]) * line_dir[group_line[ok]], axis=1)
+    return Segments2D(centers=centers[ok], directions=directions, lengths=np.full(int(ok.sum()), L),
+                      polarity=(group_polarity[ok] * sign).astype(np.int8), contrast=(sw / np.maximum(count, 1))[ok],
+                      line_id=group_line[ok], t=seg_t)
+
+
+def _empty() -> Segments2D:
+    return Segments2D(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), np.zeros(0, np.int8), np.zeros(0),
+                      np.zeros(0, np.int64), np.zeros(0))
+
+
+def detect_hough(image: np.ndarray, params: LineParams, grad: Gradients | None = None,
+                 times: StageTimes | None = None) -> Segments2D:
+    """Local segments of an (H, W) uint8 image by the orientation-sensitive Hough transform."""
+    times = times or StageTimes()
+    t0 = time.perf_counter()
+    grad = grad or gradients(image, params)
+    t0 = times.add("gradients", t0)
+    points = edge_points(grad)
+    labels = hough_assign(points, image.shape, params)
+    t0 = times.add("hough", t0)
+    segments = local_segments(points, labels, params)
+    times.add("local segments", t0)
+    return segments
+
+
+_LSD = None
+
+
+def detect_lsd(image: np.ndarray, params: LineParams, grad: Gradients | None = None,
+               times: StageTimes | None = None) -> Segments2D:
+    """Local segments from OpenCV's line segment detector, cut to ``segment_length_px``."""
+    global _LSD
+    times = times or StageTimes()
+    t0 = time.perf_counter()
+    grad = grad or gradients(image, params)
+    t0 = times.add("gradients", t0)
+    if _LSD is None:
+        _LSD = cv2.createLineSegmentDetector(cv2.LSD_REFINE_STD)
+    found = _LSD.detect(image)[0]
+    t0 = times.add("hough", t0)  # the line-finding stage, for comparable breakdowns
+    if found is None:
+        return _empty()
+    ends = found.reshape(-1, 4).astype(np.float64)
+    a, b = ends[:, :2], ends[:, 2:]
+    length = np.linalg.norm(b - a, axis=1)
+    L = params.segment_length_px
+    pieces = np.floor(length / L + 1.0 - params.min_fill).astype(np.int64)
+    pieces[length < params.min_fill * L] = 0
+    line = np.repeat(np.arange(len(ends)), pieces)
+    if len(line) == 0:
+        return _empty()
+    first = np.cumsum(pieces) - pieces
+    index_in_line = np.arange(len(line)) - np.repeat(first, pieces)
+    direction = (b - a) / np.maximum(length, 1e-9)[:, None]
+    t = (index_in_line + 0.5) * L - pieces[line] * L / 2  # pieces centred on the line
+    centers = (a + b)[line] / 2 + t[:, None] * direction[line]
+    directions = _canonical(direction[line])
+    normals = np.column_stack([-directions[:, 1], directions[:, 0]])
+    gx = sample(grad.gx, centers[:, 0], centers[:, 1])
+    gy = sample(grad.gy, centers[:, 0], centers[:, 1])
+    along_normal = gx * normals[:, 0] + gy * normals[:, 1]
+    segments = Segments2D(centers, directions, np.full(len(line), L), np.where(along_normal >= 0, 1, -1)
+                          .astype(np.int8), np.abs(along_normal), line, t)
+    times.add("local segments", t0)
+    return segments.select(segments.contrast >= params.gradient_threshold / 2)
+
+
+DETECTORS = {"hough": detect_hough, "lsd": detect_lsd}

@@ -1,0 +1,289 @@
+"""Stereo correspondence of 2D local segments and triangulation into 3D local
+segments (the paper's section 2.2.1, second half).
+
+Matching, in rectified images (epipolar lines are image rows):
+
+- A left segment is *critical* when it is within ``critical_angle_deg`` of the
+  epipolar direction (the row): its disparity along the row is undefined
+  (the paper's critical plane). Critical segments are counted and rejected.
+- Candidates: right segments whose extent covers the left centre's row, with
+  the disparity at that row in the range given by ``min_depth_m`` and
+  ``max_depth_m``, the same gradient polarity, and directions within
+  ``max_orientation_diff_deg``.
+- Score = NCC of grey-level patches sampled along the two segments (rows
+  through the segment, horizontal offsets across it, so corresponding samples
+  share a row) minus ``orientation_weight * (angle difference / max)^2``.
+  NCC is blind to brightness and contrast, and every clean step edge
+  correlates with every other near 1, so the score also loses
+  ``(mean difference / brightness_tolerance)^2`` and
+  ``(log contrast ratio / contrast_tolerance)^2`` (rectified stereo cameras
+  have nearly equal gains; the tolerances allow for some difference).
+- A right line may offer several local segments to one left segment; only its
+  best counts. The best right line is kept if its cost (1 - score) is below
+  ``ratio`` times the second line's cost, its score at least ``min_score``,
+  and the right segment's own best left line is this one (left-right check).
+
+Triangulation with global support: the matched left segments that lie on the
+same left Hough line and matched the same right line see one 3D line, along
+which disparity is an affine function of image position. A weighted
+least-squares fit of disparity along that stretch (outliers beyond
+``fit_outlier_px`` dropped, then refitted) gives every segment of it a depth and
+a 3D direction that a single short segment could not: at 0.5 m with an 8 cm
+baseline one pixel of disparity is 5 mm of depth, so a 15 px segment's own
+endpoints tilt it by degrees. A segment alone on its stretch keeps its own
+disparity and takes its direction from the intersection of the two
+back-projected planes. Each segment carries the standard deviation of its
+depth from the fit (``sigma_depth_m``).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .lines2d import Segments2D, StageTimes, sample
+from .recording import StereoIntrinsics
+from .segments import Segments
+
+
+@dataclass(frozen=True)
+class StereoParams:
+    min_depth_m: float = 0.2
+    max_depth_m: float = 3.0
+    critical_angle_deg: float = 12.0
+    max_orientation_diff_deg: float = 20.0
+    orientation_weight: float = 0.3
+    min_score: float = 0.6
+    ratio: float = 0.8
+    patch_half_width_px: int = 3
+    brightness_tolerance: float = 25.0   # grey levels: patch means this far apart cost 1 in score
+    contrast_tolerance: float = 0.5      # log ratio of patch contrasts that costs 1 in score
+    side_score: float = 0.75             # best score of a one-sided (occluding edge) match
+    fit_outlier_px: float = 1.0
+    default_disparity_sigma_px: float = 0.25
+
+
+@dataclass
+class Matches:
+    """Accepted correspondences: left, right: (K,) indices; disparity (K,) px at the left centre; score (K,)."""
+
+    left: np.ndarray
+    right: np.ndarray
+    disparity: np.ndarray
+    score: np.ndarray
+    critical: int = 0      # left segments rejected as near the critical plane
+    unmatched: int = 0     # non-critical left segments without an accepted match
+
+
+def _angle_from_rows(directions: np.ndarray) -> np.ndarray:
+    return np.degrees(np.arcsin(np.clip(np.abs(directions[:, 1]), 0.0, 1.0)))
+
+
+def _row_crossing(seg: Segments2D, index: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """u where the line of segments ``index`` crosses rows ``v``."""
+    c, d = seg.centers[index], seg.directions[index]
+    return c[..., 0] + (v - c[..., 1]) * d[..., 0] / d[..., 1]
+
+
+def _group_best(keys: np.ndarray, score: np.ndarray) -> np.ndarray:
+    """Indices of the best-scoring element of every distinct key."""
+    order = np.lexsort((-score, keys))
+    first = np.ones(len(order), bool)
+    first[1:] = keys[order][1:] != keys[order][:-1]
+    return order[first]
+
+
+def match(left_img: np.ndarray, right_img: np.ndarray, left: Segments2D, right: Segments2D,
+          intr: StereoIntrinsics, params: StereoParams) -> Matches:
+    """Stereo correspondences between the local segments of a rectified pair."""
+    critical_l = _angle_from_rows(left.directions) < params.critical_angle_deg
+    usable_r = np.flatnonzero(_angle_from_rows(right.directions) >= params.critical_angle_deg)
+    usable_l = np.flatnonzero(~critical_l)
+    empty = Matches(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros(0),
+                    int(critical_l.sum()), len(usable_l))
+    if len(usable_l) == 0 or len(usable_r) == 0:
+        return empty
+    # candidate pairs: right segments whose rows cover the left centre's row
+    order = usable_r[np.argsort(right.centers[usable_r, 1])]
+    v_sorted = right.centers[order, 1]
+    reach = right.lengths.max() / 2 + 0.5
+    v_left = left.centers[usable_l, 1]
+    start = np.searchsorted(v_sorted, v_left - reach)
+    count = np.searchsorted(v_sorted, v_left + reach) - start
+    li = np.repeat(usable_l, count)
+    offsets = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+    rj = order[np.repeat(start, count) + offsets]
+    v = left.centers[li, 1]
+    half_height = right.lengths[rj] / 2 * np.abs(right.directions[rj, 1]) + 0.5
+    disparity = left.centers[li, 0] - _row_crossing(right, rj, v)
+    d_min = intr.fx * intr.baseline / params.max_depth_m
+    d_max = intr.fx * intr.baseline / params.min_depth_m
+    cos_diff = np.abs(np.sum(left.directions[li] * right.directions[rj], axis=1))
+    grad_l = left.normals[li] * left.polarity[li, None]
+    grad_r = right.normals[rj] * right.polarity[rj, None]
+    ok = ((np.abs(v - right.centers[rj, 1]) <= half_height) & (disparity >= d_min) & (disparity <= d_max)
+          & (np.sum(grad_l * grad_r, axis=1) > 0)
+          & (cos_diff >= np.cos(np.radians(params.max_orientation_diff_deg))))
+    li, rj, disparity, cos_diff = li[ok], rj[ok], disparity[ok], cos_diff[ok]
+    if len(li) == 0:
+        return empty
+    score = _ncc(left_img, right_img, left, right, li, rj, params) - params.orientation_weight * (
+        np.degrees(np.arccos(np.clip(cos_diff, -1, 1))) / params.max_orientation_diff_deg) ** 2
+    # best local segment per (left segment, right line), then the ratio test between right lines
+    n_right_lines = int(right.line_id.max()) + 1
+    best = _group_best(li * n_right_lines + right.line_id[rj], score)
+    li, rj, disparity, score = li[best], rj[best], disparity[best], score[best]
+    order = np.lexsort((-score, li))
+    li, rj, disparity, score = li[order], rj[order], disparity[order], score[order]
+    first = np.ones(len(li), bool)
+    first[1:] = li[1:] != li[:-1]
+    second_score = np.full(len(li), -np.inf)
+    has_second = np.zeros(len(li), bool)
+    has_second[:-1] = first[:-1] & (li[1:] == li[:-1])
+    second_score[has_second] = score[np.flatnonzero(has_second) + 1]
+    cost, second_cost = 1.0 - score, 1.0 - second_score
+    accept = first & (score >= params.min_score) & (~has_second | (cost < params.ratio * second_cost))
+    # left-right check: the right segment's best left line (over all its candidates) must be ours
+    n_left_lines = int(left.line_id.max()) + 1
+    best_for_right = _group_best(rj * n_left_lines + left.line_id[li], score)
+    top = _group_best(rj[best_for_right], score[best_for_right])
+    right_choice = np.full(len(right), -1)
+    right_choice[rj[best_for_right][top]] = left.line_id[li[best_for_right][top]]
+    accept &= right_choice[rj] == left.line_id[li]
+    k = np.flatnonzero(accept)
+    return Matches(li[k], rj[k], disparity[k], score[k], int(critical_l.sum()), len(usable_l) - len(k))
+
+
+def _ncc(left_img, right_img, left: Segments2D, right: Segments2D, li, rj, params: StereoParams) -> np.ndarray:
+    """Photometric score (P,) of patches along matched segments: the better of the
+    whole patch's score and a one-sided score. At an occluding edge only the
+    occluder's side looks the same in both views; the one-sided score compares
+    the mean brightness of one side (the step itself excluded) and is capped at
+    ``side_score``, below what a good whole-patch match reaches."""
+    n_along = 8
+    s = np.linspace(-0.4, 0.4, n_along)[None, :] * left.lengths[li][:, None]          # (P, S)
+    rows = left.centers[li, 1][:, None] + s * left.directions[li, 1][:, None]
+    u_left = left.centers[li, 0][:, None] + s * left.directions[li, 0][:, None]
+    u_right = _row_crossing(right, rj[:, None], rows)
+    w = params.patch_half_width_px
+    h = np.arange(-w, w + 1, dtype=float)
+    rows3 = np.repeat(rows[:, :, None], len(h), axis=2)
+    a = sample(left_img, u_left[:, :, None] + h, rows3)     # (P, S, H)
+    b = sample(right_img, u_right[:, :, None] + h, rows3)
+    whole = _patch_score(a.reshape(len(li), -1), b.reshape(len(li), -1), params)
+    sides = [params.side_score - ((a[:, :, c].mean(axis=(1, 2)) - b[:, :, c].mean(axis=(1, 2)))
+                                  / params.brightness_tolerance) ** 2 for c in (slice(0, w), slice(w + 1, None))]
+    return np.max([whole, *sides], axis=0)
+
+
+def _patch_score(a: np.ndarray, b: np.ndarray, params: StereoParams) -> np.ndarray:
+    """NCC minus brightness and contrast differences, row by row of (P, n) samples."""
+    mean_a, mean_b = a.mean(axis=1), b.mean(axis=1)
+    a = a - mean_a[:, None]
+    b = b - mean_b[:, None]
+    energy_a, energy_b = (a * a).sum(axis=1), (b * b).sum(axis=1)
+    denominator = np.sqrt(energy_a * energy_b)
+    ncc = np.where(denominator > 1e-6, (a * b).sum(axis=1) / np.maximum(denominator, 1e-12), 0.0)
+    # NCC alone cannot tell one step edge from another: compare brightness and contrast too
+    contrast = np.log((np.sqrt(energy_a / a.shape[1]) + 1.0) / (np.sqrt(energy_b / b.shape[1]) + 1.0))
+    return ncc - ((mean_a - mean_b) / params.brightness_tolerance) ** 2 - (contrast / params.contrast_tolerance) ** 2
+
+
+def _backproject(u: np.ndarray, v: np.ndarray, d: np.ndarray, intr: StereoIntrinsics) -> np.ndarray:
+    """(N, 3) points in the left camera frame, metres, from pixel (u, v) and disparity d."""
+    z = intr.fx * intr.baseline / d
+    return np.column_stack([(u - intr.cx) * z / intr.fx, (v - intr.cy) * z / intr.fy, z])
+
+
+def triangulate(left: Segments2D, right: Segments2D, m: Matches, intr: StereoIntrinsics,
+                params: StereoParams, frame_id: str) -> tuple[Segments, np.ndarray]:
+    """3D local segments (left camera frame) of the matches, and the (K,) indices of ``m`` they come from."""
+    if len(m.left) == 0:
+        return Segments.empty(frame_id), np.zeros(0, np.int64)
+    n_right_lines = int(right.line_id.max()) + 1
+    stretch_key = left.line_id[m.left] * n_right_lines + right.line_id[m.right]
+    _, stretch = np.unique(stretch_key, return_inverse=True)
+    stretch = stretch.ravel()
+    n = int(stretch.max()) + 1
+    centers, dirs = left.centers[m.left], left.directions[m.left]
+    axis = np.zeros((n, 2))
+    np.add.at(axis, stretch, dirs)
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    s = np.sum(centers * axis[stretch], axis=1)
+    weight = np.clip(m.score, 0.05, None)
+    keep = np.ones(len(s), bool)
+    for _ in range(2):  # fit, drop outliers, refit
+        a, b, sigma, count, spread = _fit_lines(stretch, n, s, m.disparity, weight * keep)
+        residual = m.disparity - (a[stretch] + b[stretch] * s)
+        fitted = (count[stretch] >= 3) & (spread[stretch] >= left.lengths[m.left])
+        keep = ~fitted | (np.abs(residual) <= params.fit_outlier_px)
+    use = keep
+    fitted = fitted & keep
+    idx = np.flatnonzero(use)
+    half = (left.lengths[m.left] / 2)[:, None] * dirs
+    along = np.sum(dirs * axis[stretch], axis=1) * left.lengths[m.left] / 2
+    d_center = np.where(fitted, a[stretch] + b[stretch] * s, m.disparity)
+    d_minus = np.where(fitted, d_center - b[stretch] * along, m.disparity)
+    d_plus = np.where(fitted, d_center + b[stretch] * along, m.disparity)
+    p_center = _backproject(centers[:, 0], centers[:, 1], d_center, intr)
+    p_minus = _backproject(centers[:, 0] - half[:, 0], centers[:, 1] - half[:, 1], d_minus, intr)
+    p_plus = _backproject(centers[:, 0] + half[:, 0], centers[:, 1] + half[:, 1], d_plus, intr)
+    direction = p_plus - p_minus
+    alone = ~fitted
+    if alone.any():  # direction from the intersection of the two back-projected planes
+        direction[alone] = _plane_intersection(left, right, m, intr)[alone] * \
+            np.linalg.norm(direction[alone], axis=1, keepdims=True)
+    length = np.linalg.norm(p_plus - p_minus, axis=1)
+    direction = direction / np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-12)
+    # depth uncertainty: fit residual (or a default) through the disparity's sensitivity
+    sigma_d = np.where(fitted, np.maximum(sigma[stretch], 0.05) * np.sqrt(
+        1.0 / np.maximum(count[stretch], 1) + (s - _mean_s(stretch, n, s, weight * keep)[stretch]) ** 2
+        / np.maximum(spread[stretch] ** 2 / 3, 1e-9)), params.default_disparity_sigma_px)
+    sigma_depth = p_center[:, 2] ** 2 / (intr.fx * intr.baseline) * sigma_d
+    segments = Segments(frame_id, p_center, direction, length, np.clip(m.score, 0, 1),
+                        np.ones(len(p_center), np.int64),
+                        {"sigma_depth_m": sigma_depth, "disparity_px": d_center,
+                         "u": centers[:, 0], "v": centers[:, 1]})
+    return segments.select(idx), idx
+
+
+def _fit_lines(group, n, s, d, w):
+    """Weighted least squares d = a + b s per group: a, b, residual sigma, count, spread of s."""
+    sw = np.bincount(group, w, n)
+    safe = np.where(sw > 0, sw, 1.0)
+    ms = np.bincount(group, w * s, n) / safe
+    md = np.bincount(group, w * d, n) / safe
+    ds, dd = s - ms[group], d - md[group]
+    sss = np.bincount(group, w * ds * ds, n)
+    ssd = np.bincount(group, w * ds * dd, n)
+    b = np.where(sss > 1e-9, ssd / np.where(sss > 1e-9, sss, 1.0), 0.0)
+    a = md - b * ms
+    count = np.bincount(group, (w > 0).astype(float), n)
+    residual = d - (a[group] + b[group] * s)
+    sigma = np.sqrt(np.bincount(group, w * residual ** 2, n) / safe * count / np.maximum(count - 2, 1))
+    lo = np.full(n, np.inf)
+    hi = np.full(n, -np.inf)
+    np.minimum.at(lo, group[w > 0], s[w > 0])
+    np.maximum.at(hi, group[w > 0], s[w > 0])
+    return a, b, sigma, count, np.where(hi > lo, hi - lo, 0.0)
+
+
+def _mean_s(group, n, s, w):
+    sw = np.bincount(group, w, n)
+    return np.bincount(group, w * s, n) / np.where(sw > 0, sw, 1.0)
+
+
+def _plane_intersection(left: Segments2D, right: Segments2D, m: Matches, intr: StereoIntrinsics) -> np.ndarray:
+    """(K, 3) unit 3D directions from the planes through each camera centre and its 2D line."""
+    K_inv = np.linalg.inv(intr.K)
+
+    def plane_normal(seg: Segments2D, index: np.ndarray) -> np.ndarray:
+        c = np.column_stack([seg.centers[index], np.ones(len(index))])
+        e = c.copy()
+        e[:, :2] += seg.directions[index]
+        return np.cross(c @ K_inv.T, e @ K_inv.T)
+
+    direction = np.cross(plane_normal(left, m.left), plane_normal(right, m.right))
+    return direction / np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-12)
