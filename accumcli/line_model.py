@@ -4,13 +4,25 @@ Entities are ``Segments`` in the object frame with running sums in ``extra``:
 
 - position in information form: ``info`` (N, 3, 3), 1/m^2, and ``info_vec``
   (N, 3); the centre is ``info^-1 info_vec``. One observation's covariance is
-  ``sigma_lat^2 I + (sigma_depth^2 - sigma_lat^2) r r^T + (length^2 / 12) u u^T``
-  (r the viewing ray, u the direction): depth is the weak direction of stereo,
-  and along the segment its position is arbitrary (the aperture problem). The
-  merge is thus a weighted average that trusts each view where it is precise,
-  each view weighted by its match confidence;
-- ``dir_sum`` (N, 3), ``len_sum`` (N,), ``weight`` (N,): confidence-weighted
-  sums of the sign-aligned directions and of the lengths;
+  ``sigma_lat^2 I + (sigma_depth^2 - sigma_lat^2) r r^T`` (r the viewing ray:
+  depth is the weak direction of stereo), and it informs the position only
+  across its direction u: along the line, where a local segment is cut is
+  arbitrary (the aperture problem), so a model segment keeps the place along
+  the line where it was created (``anchor``, the information
+  ``12 / length^2`` of its first observation). Without this, merged pieces
+  drift along their edge, bunch up and leave gaps. The merge is thus a
+  weighted average that trusts each view where it is precise, each view
+  weighted by its match confidence;
+- ``dir_sum`` (N, 3): the sum of the sign-aligned directions, each weighted by
+  its confidence and the inverse variance of its direction (a segment fitted
+  along a long stretch is sure of its direction, one alone is not);
+  ``weight`` (N,): the sum of confidences;
+- the extent along the line (centre and length) is the union of the extents
+  of the observations merged into the segment, at most ``max_extent``
+  observation lengths: a confirmation by a piece cut further along the edge
+  extends the segment instead of leaving a gap that neither neighbour covers
+  (the metric forgives shifts of half a length, so the gap's own pieces
+  confirm the neighbours and are never added);
 - ``view_sum`` (N, 3), ``view_spread`` (N,) radians: the directions (object
   frame) from which the segment was confirmed, as their sum and the cone's
   half-angle.
@@ -38,7 +50,6 @@ from .metric import MetricThresholds, candidate_pairs
 from .recording import StereoIntrinsics
 from .segments import Segments, concatenate
 
-STATE_KEYS = ("info", "info_vec", "dir_sum", "len_sum", "weight", "view_sum", "view_spread")
 
 
 @dataclass(frozen=True)
@@ -50,6 +61,8 @@ class LineModelParams:
     critical_angle_deg: float = 12.0
     image_margin_px: float = 5.0
     duplicate_shift: float = 0.25     # fraction of a length; closer centres along the line are duplicates
+    max_extent: float = 1.6           # a model segment covers at most this many observation lengths
+    reference_direction_sigma_deg: float = 2.0  # a direction this certain weighs as much as its confidence
 
 
 @dataclass
@@ -68,8 +81,8 @@ class LineSegmentType:
 
     def empty(self, frame_id: str) -> Segments:
         s = Segments.empty(frame_id)
-        s.extra = {"info": np.zeros((0, 3, 3)), "info_vec": np.zeros((0, 3)), "dir_sum": np.zeros((0, 3)),
-                   "len_sum": np.zeros(0), "weight": np.zeros(0), "view_sum": np.zeros((0, 3)),
+        s.extra = {"info": np.zeros((0, 3, 3)), "info_vec": np.zeros((0, 3)), "anchor": np.zeros(0),
+                   "dir_sum": np.zeros((0, 3)), "weight": np.zeros(0), "view_sum": np.zeros((0, 3)),
                    "view_spread": np.zeros(0)}
         return s
 
@@ -111,13 +124,18 @@ class LineSegmentType:
         u = observed.directions
         cov = (sigma_lat[:, None, None] ** 2 * np.eye(3)
                + (np.maximum(sigma_depth, sigma_lat) ** 2 - sigma_lat ** 2)[:, None, None] * ray[:, :, None] *
-               ray[:, None, :] + (observed.lengths ** 2 / 12)[:, None, None] * u[:, :, None] * u[:, None, :])
+               ray[:, None, :])
         w = np.clip(observed.confidence, 0.05, 1.0)
-        info = np.linalg.inv(cov) * w[:, None, None]
+        across = np.eye(3) - u[:, :, None] * u[:, None, :]
+        info = across @ np.linalg.inv(cov) @ across * w[:, None, None]
+        anchor = w / (observed.lengths ** 2 / 12)
+        info = info + anchor[:, None, None] * u[:, :, None] * u[:, None, :]
         out = Segments(observed.frame_id, observed.centers, u, observed.lengths, observed.confidence,
                        observed.observations)
-        out.extra = {"info": info, "info_vec": np.einsum("nij,nj->ni", info, observed.centers),
-                     "dir_sum": u * w[:, None], "len_sum": observed.lengths * w, "weight": w,
+        sigma_direction = observed.extra.get("sigma_direction_rad", np.full(len(observed), np.radians(5.0)))
+        direction_weight = w * (np.radians(p.reference_direction_sigma_deg) / np.maximum(sigma_direction, 1e-3)) ** 2
+        out.extra = {"info": info, "info_vec": np.einsum("nij,nj->ni", info, observed.centers), "anchor": anchor,
+                     "dir_sum": u * direction_weight[:, None], "weight": w,
                      "view_sum": ray, "view_spread": np.zeros(len(observed))}
         return out
 
@@ -127,14 +145,17 @@ class LineSegmentType:
         x, o = model.extra, observed.extra
         extra = {k: v.copy() for k, v in x.items()}
         scale = np.minimum(1.0, self.params.max_weight / np.maximum(x["weight"][mi], 1e-9))
-        for key in ("info", "info_vec", "dir_sum", "len_sum", "weight"):
+        for key in ("info", "info_vec", "dir_sum", "weight"):
             shape = (-1,) + (1,) * (x[key].ndim - 1)
             extra[key][mi] = x[key][mi] * scale.reshape(shape)
         sign = np.where(np.sum(model.directions[mi] * observed.directions[oi], axis=1) >= 0, 1.0, -1.0)
-        extra["info"][mi] += o["info"][oi]
-        extra["info_vec"][mi] += o["info_vec"][oi]
+        # the observation informs the position across its direction only: the model segment keeps
+        # its place along the line (where a local segment was cut is arbitrary)
+        u_o = observed.directions[oi]
+        along = o["anchor"][oi][:, None, None] * u_o[:, :, None] * u_o[:, None, :]
+        extra["info"][mi] += o["info"][oi] - along
+        extra["info_vec"][mi] += o["info_vec"][oi] - np.einsum("nij,nj->ni", along, observed.centers[oi])
         extra["dir_sum"][mi] += o["dir_sum"][oi] * sign[:, None]
-        extra["len_sum"][mi] += o["len_sum"][oi]
         extra["weight"][mi] += o["weight"][oi]
         old_view = _unit(x["view_sum"][mi])
         extra["view_sum"][mi] += o["view_sum"][oi]
@@ -142,11 +163,22 @@ class LineSegmentType:
         extra["view_spread"][mi] = np.maximum(x["view_spread"][mi] + _angle(old_view, new_view),
                                               _angle(o["view_sum"][oi], new_view))
         centers = model.centers.copy()
-        centers[mi] = np.linalg.solve(extra["info"][mi], extra["info_vec"][mi][:, :, None])[:, :, 0]
+        solved = np.linalg.solve(extra["info"][mi], extra["info_vec"][mi][:, :, None])[:, :, 0]
         directions = model.directions.copy()
-        directions[mi] = _unit(extra["dir_sum"][mi])
+        directions[mi] = u = _unit(extra["dir_sum"][mi])
+        # extent along the line: the union of the model's and the observation's, at most max_extent lengths
+        rel = observed.centers[oi] - model.centers[mi]
+        half_obs = observed.lengths[oi] / 2 * np.abs(np.sum(observed.directions[oi] * u, axis=1))
+        lo = np.minimum(-model.lengths[mi] / 2, np.sum(rel * u, axis=1) - half_obs)
+        hi = np.maximum(model.lengths[mi] / 2, np.sum(rel * u, axis=1) + half_obs)
+        limit = self.params.max_extent * observed.lengths[oi]
+        excess = np.maximum(hi - lo - limit, 0.0) / 2
+        lo, hi = lo + excess, hi - excess
+        along = np.sum((solved - model.centers[mi]) * u, axis=1)
+        centers[mi] = solved + ((lo + hi) / 2 - along)[:, None] * u
+        extra["info_vec"][mi] = np.einsum("nij,nj->ni", extra["info"][mi], centers[mi])
         lengths = model.lengths.copy()
-        lengths[mi] = extra["len_sum"][mi] / extra["weight"][mi]
+        lengths[mi] = hi - lo
         return Segments(model.frame_id, centers, directions, lengths, model.confidence, model.observations, extra)
 
     def expected(self, model: Segments, context: FrameContext) -> np.ndarray:

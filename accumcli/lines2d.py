@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+from scipy.spatial import cKDTree
 
 
 @dataclass(frozen=True)
@@ -54,6 +55,7 @@ class LineParams:
     max_line_distance_px: float = 1.5  # pixels farther from their fitted line are dropped
     max_gap_px: float = 3.0           # a longer gap along a line ends a run of support
     end_extension_px: float = 1.5     # pieces reach this far beyond a run's first and last pixel
+    junction_radius_px: float = 5.0   # runs ending this near another line's run meet it at the corner
     detector: str = "hough"
 
 
@@ -322,10 +324,11 @@ def local_segments(points: EdgePoints, labels: np.ndarray, params: LineParams) -
     t_hi = np.full(n_runs, -np.inf)
     np.minimum.at(t_lo, run, t)
     np.maximum.at(t_hi, run, t)
-    run_length = t_hi - t_lo + 1.0
-    count_run = np.bincount(run, minlength=n_runs)
     run_line = labels[brk]
-    fill = count_run / (run_length * np.max(np.abs(line_dir[run_line]), axis=1))
+    count_run = np.bincount(run, minlength=n_runs)
+    fill = count_run / ((t_hi - t_lo + 1.0) * np.max(np.abs(line_dir[run_line]), axis=1))
+    t_lo, t_hi = _complete_junctions(t_lo, t_hi, line_center[run_line], line_dir[run_line], run_line, params)
+    run_length = t_hi - t_lo + 1.0
     # Canny and the vote lose a pixel or two where edges meet: let the pieces reach past the run's ends
     t_lo, run_length = t_lo - params.end_extension_px, run_length + 2 * params.end_extension_px
     long_enough = (run_length >= params.min_fill * L) & (fill >= params.min_fill)
@@ -358,6 +361,39 @@ def local_segments(points: EdgePoints, labels: np.ndarray, params: LineParams) -
     return Segments2D(centers=centers[ok], directions=directions, lengths=np.full(int(ok.sum()), L),
                       polarity=(group_polarity[ok] * sign).astype(np.int8), contrast=(sw / np.maximum(count, 1))[ok],
                       line_id=group_line[ok], t=seg_t)
+
+
+def _complete_junctions(t_lo, t_hi, centers, directions, line, params: LineParams):
+    """Extend runs whose ends meet another line's run end at a corner.
+
+    Near a junction the gradient belongs to two edges, so Canny and the votes
+    lose the last pixels of each. Where the ends of two runs on different,
+    clearly non-parallel lines lie within ``junction_radius_px`` of the lines'
+    intersection, both runs are extended to it. Returns new (t_lo, t_hi).
+    """
+    radius = params.junction_radius_px
+    ends = np.concatenate([centers + t_lo[:, None] * directions, centers + t_hi[:, None] * directions])
+    n = len(t_lo)
+    run_of = np.concatenate([np.arange(n), np.arange(n)])
+    outward = np.concatenate([-directions, directions])
+    pairs = cKDTree(ends).query_pairs(2 * radius, output_type="ndarray")
+    if len(pairs) == 0:
+        return t_lo, t_hi
+    p, q = pairs[:, 0], pairs[:, 1]
+    d1, d2 = directions[run_of[p]], directions[run_of[q]]
+    cross = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+    ok = (line[run_of[p]] != line[run_of[q]]) & (np.abs(cross) > np.sin(np.radians(20)))
+    p, q, d1, d2, cross = p[ok], q[ok], d1[ok], d2[ok], cross[ok]
+    # intersection c1 + a d1 = c2 + b d2
+    diff = centers[run_of[q]] - centers[run_of[p]]
+    a = (diff[:, 0] * d2[:, 1] - diff[:, 1] * d2[:, 0]) / cross
+    meet = centers[run_of[p]] + a[:, None] * d1
+    grow_p = np.sum((meet - ends[p]) * outward[p], axis=1)
+    grow_q = np.sum((meet - ends[q]) * outward[q], axis=1)
+    ok = (grow_p >= -1.0) & (grow_p <= radius) & (grow_q >= -1.0) & (grow_q <= radius)
+    grow = np.zeros(2 * n)
+    np.maximum.at(grow, np.concatenate([p[ok], q[ok]]), np.concatenate([grow_p[ok], grow_q[ok]]))
+    return t_lo - grow[:n], t_hi + grow[n:]
 
 
 def _empty() -> Segments2D:

@@ -22,6 +22,10 @@ Matching, in rectified images (epipolar lines are image rows):
   best counts. The best right line is kept if its cost (1 - score) is below
   ``ratio`` times the second line's cost, its score at least ``min_score``,
   and the right segment's own best left line is this one (left-right check).
+- Global support in matching: along a left line that matched one right line
+  in several segments, the other segments of the line are matched to that
+  right line where their candidates agree with the fitted disparity
+  (``_propagate``).
 
 Triangulation with global support: the matched left segments that lie on the
 same left Hough line and matched the same right line see one 3D line, along
@@ -32,8 +36,10 @@ a 3D direction that a single short segment could not: at 0.5 m with an 8 cm
 baseline one pixel of disparity is 5 mm of depth, so a 15 px segment's own
 endpoints tilt it by degrees. A segment alone on its stretch keeps its own
 disparity and takes its direction from the intersection of the two
-back-projected planes. Each segment carries the standard deviation of its
-depth from the fit (``sigma_depth_m``).
+back-projected planes. Each segment carries the standard deviations of its
+depth (``sigma_depth_m``, from the fit's residuals) and of its direction
+(``sigma_direction_rad``: the fitted slope's uncertainty over the segment's
+length, or ``single_direction_sigma_deg`` for a segment alone).
 """
 
 from __future__ import annotations
@@ -61,8 +67,12 @@ class StereoParams:
     brightness_tolerance: float = 25.0   # grey levels: patch means this far apart cost 1 in score
     contrast_tolerance: float = 0.5      # log ratio of patch contrasts that costs 1 in score
     side_score: float = 0.75             # best score of a one-sided (occluding edge) match
+    min_stretch: int = 2                 # matched segments on a line before its fit is trusted
+    propagate_px: float = 1.0            # disparity agreement with the stretch fit for a propagated match
+    propagate_score: float = 0.0
     fit_outlier_px: float = 1.0
     default_disparity_sigma_px: float = 0.25
+    single_direction_sigma_deg: float = 10.0  # direction uncertainty of a segment alone on its stretch
 
 
 @dataclass
@@ -152,8 +162,42 @@ def match(left_img: np.ndarray, right_img: np.ndarray, left: Segments2D, right: 
     right_choice = np.full(len(right), -1)
     right_choice[rj[best_for_right][top]] = left.line_id[li[best_for_right][top]]
     accept &= right_choice[rj] == left.line_id[li]
+    accept |= _propagate(left, right, li, rj, disparity, score, accept, params)
     k = np.flatnonzero(accept)
     return Matches(li[k], rj[k], disparity[k], score[k], int(critical_l.sum()), len(usable_l) - len(k))
+
+
+def _propagate(left: Segments2D, right: Segments2D, li, rj, disparity, score, accept, params: StereoParams):
+    """(P,) bool: candidate pairs that the global support of an accepted stretch adds.
+
+    Where at least ``min_stretch`` segments of a left line matched one right line,
+    the disparity along the left line is fitted (it is affine in the image
+    position along a 3D line); a still unmatched segment of that left line
+    whose candidate on the same right line lies within ``propagate_px`` of the
+    fitted disparity, with a score of at least ``propagate_score``, is matched
+    too. This recovers the parts of an edge that one view's background made
+    ambiguous, e.g. along an occluding contour.
+    """
+    n_right_lines = int(right.line_id.max()) + 1
+    key = left.line_id[li] * n_right_lines + right.line_id[rj]
+    stretches, stretch = np.unique(key[accept], return_inverse=True)
+    if len(stretches) == 0:
+        return np.zeros(len(li), bool)
+    stretch = stretch.ravel()
+    s_acc = left.t[li[accept]]
+    a, b, _, count, _ = _fit_lines(stretch, len(stretches), s_acc, disparity[accept], np.ones(len(s_acc)))
+    position = np.searchsorted(stretches, key)
+    in_stretch = (position < len(stretches)) & (stretches[np.minimum(position, len(stretches) - 1)] == key)
+    position = np.minimum(position, len(stretches) - 1)
+    predicted = a[position] + b[position] * left.t[li]
+    matched_left = np.zeros(len(left), bool)
+    matched_left[li[accept]] = True
+    extra = (in_stretch & (count[position] >= params.min_stretch) & ~matched_left[li] & ~accept
+             & (np.abs(disparity - predicted) <= params.propagate_px) & (score >= params.propagate_score))
+    best = _group_best(li[extra], score[extra])  # one per left segment
+    out = np.zeros(len(li), bool)
+    out[np.flatnonzero(extra)[best]] = True
+    return out
 
 
 def _ncc(left_img, right_img, left: Segments2D, right: Segments2D, li, rj, params: StereoParams) -> np.ndarray:
@@ -241,11 +285,18 @@ def triangulate(left: Segments2D, right: Segments2D, m: Matches, intr: StereoInt
     sigma_d = np.where(fitted, np.maximum(sigma[stretch], 0.05) * np.sqrt(
         1.0 / np.maximum(count[stretch], 1) + (s - _mean_s(stretch, n, s, weight * keep)[stretch]) ** 2
         / np.maximum(spread[stretch] ** 2 / 3, 1e-9)), params.default_disparity_sigma_px)
-    sigma_depth = p_center[:, 2] ** 2 / (intr.fx * intr.baseline) * sigma_d
+    depth_per_disparity = p_center[:, 2] ** 2 / (intr.fx * intr.baseline)
+    sigma_depth = depth_per_disparity * sigma_d
+    # direction: the fitted slope's uncertainty tilts the segment along the viewing ray
+    sigma_slope = np.maximum(sigma[stretch], 0.05) / np.sqrt(np.maximum(count[stretch] * spread[stretch] ** 2 / 12,
+                                                                        1e-9))
+    sigma_direction = np.where(fitted, np.arctan2(depth_per_disparity * sigma_slope * 2 * np.abs(along),
+                                                  np.maximum(length, 1e-9)),
+                               np.radians(params.single_direction_sigma_deg))
     segments = Segments(frame_id, p_center, direction, length, np.clip(m.score, 0, 1),
                         np.ones(len(p_center), np.int64),
-                        {"sigma_depth_m": sigma_depth, "disparity_px": d_center,
-                         "u": centers[:, 0], "v": centers[:, 1]})
+                        {"sigma_depth_m": sigma_depth, "sigma_direction_rad": sigma_direction,
+                         "disparity_px": d_center, "u": centers[:, 0], "v": centers[:, 1]})
     return segments.select(idx), idx
 
 

@@ -194,7 +194,7 @@ def trajectory(k: np.ndarray, phase: float, per_frame_deg: float = 10.0) -> np.n
     k = np.asarray(k, float)
     yaw = np.radians(55.0) * np.sin(omega * k + phase)
     pitch = np.radians(25.0) * np.cos(omega * k + phase) - np.radians(10.0)
-    roll = np.radians(30.0) * np.sin(0.6 * omega * k + 2.0 * phase)
+    roll = np.radians(45.0) * np.sin(0.45 * omega * k + 2.0 * phase)
     rotations = Rotation.from_euler("yxz", np.column_stack([yaw, pitch, roll])).as_matrix()
     translations = np.column_stack([0.03 * np.sin(0.5 * omega * k), 0.02 * np.cos(0.41 * omega * k) + 0.01,
                                     0.5 + 0.04 * np.sin(0.29 * omega * k)])

@@ -55,7 +55,7 @@ class SimulationOptions:
     noise_sigma: float = 2.0
     blur_sigma: float = 0.6
     supersample: int = 4
-    per_frame_deg: float = 10.0
+    per_frame_deg: float = 9.8
 
 
 @dataclass
