@@ -28,9 +28,11 @@ by the known motion (the entity type's ``transform``):
    bounds the model's size on long recordings.
 
 The log-odds L of confidence c is ``log(c / (1 - c))``, clamped to
-``ceiling``. With the defaults a new entity (0.2) is accepted (>= 0.5) at its
-second confirmation, i.e. after three observations, and falls to the floor
-after two expected misses.
+``ceiling``. With the defaults a hit adds log 5 = 1.61 and a miss
+log(5/9) = -0.59: a new entity (0.25) is accepted (>= 0.5) at its first
+confirmation, i.e. seen in two frames, and is pruned after three expected misses
+without confirmation; an entity of the object survives as long as it is
+extracted in more than about a quarter of the frames that should show it.
 """
 
 from __future__ import annotations
@@ -78,9 +80,9 @@ def logit(p: float) -> float:
 
 @dataclass(frozen=True)
 class UpdateRule:
-    p_detect: float = 0.6      # an entity of the object that the frame should show is extracted
-    p_false: float = 0.2       # something is extracted there although the entity is not real
-    initial: float = 0.2       # confidence of a new entity
+    p_detect: float = 0.5      # an entity of the object that the frame should show is extracted
+    p_false: float = 0.1       # something is extracted there although the entity is not real
+    initial: float = 0.25      # confidence of a new entity
     floor: float = 0.1         # pruned below
     ceiling: float = 0.995
     tentative_frames: int = 6  # a tentative entity unconfirmed this long is pruned

@@ -136,6 +136,56 @@ frames_option = click.option("--frames", "frame_range", type=FrameRange(), defau
                              help="Stereo frames to use, START:STOP (0-based, STOP excluded).")
 
 
+def extraction_options(func):
+    """Options of single-frame extraction (declared once; extract, accumulate and track share them)."""
+    options = [
+        click.option("--detector", type=click.Choice(["hough", "lsd"]), default="hough", show_default=True,
+                     help="2D line detector: the paper's orientation-sensitive Hough transform, or OpenCV's LSD."),
+        click.option("--segment-length", type=click.FloatRange(4.0, 100.0), default=15.0, show_default=True,
+                     help="Length of a local segment, pixels."),
+        click.option("--gradient-threshold", type=click.FloatRange(0.1, 100.0), default=3.0, show_default=True,
+                     help="Edge gradient threshold, grey levels per pixel."),
+        click.option("--critical-angle", type=click.FloatRange(0.0, 45.0), default=12.0, show_default=True,
+                     help="Segments closer than this to the epipolar direction (degrees) are rejected."),
+        click.option("--depth-range", default="0.2:3.0", show_default=True, metavar="MIN:MAX",
+                     help="Depths searched by stereo matching, metres."),
+    ]
+    for option in reversed(options):
+        func = option(func)
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        from .extract import ExtractParams
+        from .lines2d import LineParams
+        from .stereo import StereoParams
+
+        depth = kwargs.pop("depth_range")
+        try:
+            near, far = (float(x) for x in depth.split(":"))
+            assert 0 < near < far
+        except (ValueError, AssertionError):
+            raise click.BadParameter(f"expected MIN:MAX metres with 0 < MIN < MAX, found {depth!r}",
+                                     param_hint="--depth-range") from None
+        critical = kwargs.pop("critical_angle")
+        kwargs["extract_params"] = ExtractParams(
+            LineParams(detector=kwargs.pop("detector"), segment_length_px=kwargs.pop("segment_length"),
+                       gradient_threshold=kwargs.pop("gradient_threshold")),
+            StereoParams(min_depth_m=near, max_depth_m=far, critical_angle_deg=critical))
+        return func(*args, **kwargs)
+
+    return wrapper
+
+
+def _output_path(ctx, param, value):
+    """Outputs must go to an existing folder (checked before any work is done)."""
+    from pathlib import Path
+
+    for path in (value if isinstance(value, tuple) else (value,)):
+        if path and not Path(path).resolve().parent.is_dir():
+            raise click.BadParameter(f"the folder of {path} does not exist")
+    return value
+
+
 # -- info -----------------------------------------------------------------------------------------
 @main.command()
 @click.argument("recording", type=click.Path(dir_okay=False))
@@ -202,7 +252,7 @@ def _parse_pose_noise(ctx, param, value):
 @main.command()
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
               help="Recording to write (NAME.mcap); the truth goes to NAME.truth.json.")
-@click.option("--frames", "n_frames", type=click.IntRange(min=1), default=24, show_default=True)
+@click.option("--frames", "n_frames", type=click.IntRange(min=1), default=36, show_default=True)
 @click.option("--size", default="640x480", show_default=True, help="Image size WIDTHxHEIGHT.")
 @click.option("--shape", type=click.Choice(["box", "prism", "house"]), default="box", show_default=True)
 @click.option("--seed", type=int, default=0, show_default=True)
@@ -242,6 +292,220 @@ def simulate(ctx, output, n_frames, size, shape, seed, raw, tf_tree, pose_noise,
         result = run(output, options, progress=advance)
     click.echo(f"wrote {result.recording} ({result.frames} frames) and {result.truth} "
                f"({result.edges} edges, {result.seen_fraction:.0%} of edge length seen in >= 3 frames)")
+
+
+# -- extract -------------------------------------------------------------------------------------
+@main.command()
+@click.argument("recording", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), callback=_output_path,
+              help="Frames file to write (JSON lines, one stereo frame per line).")
+@click.option("--rrd", type=click.Path(dir_okay=False), callback=_output_path,
+              help="Also save a Rerun recording of each frame's images, 2D and 3D segments.")
+@frames_option
+@extraction_options
+@recording_options
+@click.pass_context
+def extract(ctx, recording, output, rrd, frame_range, extract_params, recording_kwargs):
+    """Extract local 3D line segments from every stereo pair.
+
+    Each line of the output is a model-format object in the left camera frame
+    with the frame's timestamp, its counts, and its recorded pose if any.
+
+    \b
+    Example:
+      accum extract sample_data/sim_box.mcap -o out/frames.jsonl --frames 0:10
+    """
+    import numpy as np
+
+    from .extract import extract_frame
+    from .geometry import quat_from_transform
+    from .lines2d import StageTimes
+    from .model_io import FramesWriter
+    from .recording import Recording
+
+    times = StageTimes()
+    totals = {"frames": 0, "segments": 0, "left_2d": 0, "critical": 0, "unmatched": 0}
+    with Recording(recording, **recording_kwargs) as rec, FramesWriter(output) as out, \
+            _rerun(rrd, "extract") as viz, progress_bar(ctx, _frames_to_do(rec, frame_range), "extracting") as bar:
+        for frame in rec.frames(*frame_range):
+            result = extract_frame(frame, extract_params, rec.camera_frame, times)
+            header = {"frame_index": frame.index, "counts": result.counts}
+            if frame.T_camera_object is not None:
+                translation, quat = quat_from_transform(frame.T_camera_object)
+                header["T_camera_object"] = {"translation": np.round(translation, 9).tolist(),
+                                             "rotation_xyzw": np.round(quat, 9).tolist()}
+            out.write(result.segments, frame.timestamp_ns, **header)
+            if viz:
+                viz.extraction(frame, result)
+            totals["frames"] += 1
+            for key in ("segments", "left_2d", "critical", "unmatched"):
+                totals[key] += result.counts[key]
+            bar(1)
+    n = max(totals["frames"], 1)
+    click.echo(f"{totals['frames']} frames: {totals['segments'] / n:.0f} 3D segments per frame from "
+               f"{totals['left_2d'] / n:.0f} left 2D segments ({totals['critical'] / n:.0f} critical, "
+               f"{totals['unmatched'] / n:.0f} unmatched)")
+    click.echo("time per frame: " + ", ".join(f"{k} {1000 * v / n:.1f} ms" for k, v in times.seconds.items()))
+    click.echo(f"wrote {output}" + (f" and {rrd}" if rrd else ""))
+
+
+def _frames_to_do(rec, frame_range) -> int:
+    start, stop = frame_range
+    total = rec.frame_count_hint
+    return max(0, (min(stop, total) if stop is not None else total) - start)
+
+
+@contextlib.contextmanager
+def _rerun(rrd, kind: str):
+    """A Rerun log saving to ``rrd``, or None when no .rrd was asked for."""
+    if not rrd:
+        yield None
+        return
+    from .visualize import RerunLog
+
+    log_ = RerunLog(f"accum {kind}", rrd=rrd, kind=kind)
+    try:
+        yield log_
+    finally:
+        log_.close()
+
+
+# -- accumulate ----------------------------------------------------------------------------------
+def _model_outputs(ctx, param, value):
+    value = _output_path(ctx, param, value)
+    for path in value:
+        if not path.lower().endswith((".json", ".ply")):
+            raise click.BadParameter(f"expected a .json or .ply file, found {path!r}")
+    return value
+
+
+@main.command()
+@click.argument("recording", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", "outputs", multiple=True, required=True, type=click.Path(dir_okay=False),
+              callback=_model_outputs, help="Model to write: .json (the model) and/or .ply (line set); repeatable.")
+@click.option("--rrd", type=click.Path(dir_okay=False), callback=_output_path,
+              help="Also save a Rerun recording: images, segments, the model by confidence, counts over time.")
+@click.option("--truth", type=click.Path(dir_okay=False, exists=True),
+              help="A truth sidecar: also measure precision, completeness and background frame by frame.")
+@click.option("--history", type=click.Path(dir_okay=False), callback=_output_path,
+              help="Write the per-frame counts (and figures with --truth) as JSON lines.")
+@click.option("--position-threshold", type=click.FloatRange(0.1, 50.0), default=3.0, show_default=True,
+              help="s_p of the metric, millimetres.")
+@click.option("--angle-threshold", type=click.FloatRange(0.5, 45.0), default=7.0, show_default=True,
+              help="s_o of the metric, degrees.")
+@frames_option
+@extraction_options
+@recording_options
+@click.pass_context
+def accumulate(ctx, recording, outputs, rrd, truth, history, position_threshold, angle_threshold, frame_range,
+               extract_params, recording_kwargs):
+    """Accumulate a model of the object over the recording, with the gripper's known motion.
+
+    \b
+    Example:
+      accum accumulate sample_data/sim_box.mcap -o out/model.json -o out/model.ply --rrd out/run.rrd
+      accum accumulate sample_data/chessboard/chessboard.mcap --object-frame board -o out/board.json
+    """
+    import json
+    from dataclasses import replace
+
+    from .atomic import atomic_open
+    from .evaluate import EdgeSamples, score_segments
+    from .line_model import LineModelParams
+    from .metric import MetricThresholds
+    from .model_io import read_truth, write_model, write_ply
+    from .pipeline import AccumulateParams, LineAccumulation
+    from .recording import Recording
+
+    line_model = LineModelParams(thresholds=MetricThresholds(position_threshold / 1000.0, angle_threshold),
+                                 critical_angle_deg=extract_params.stereo.critical_angle_deg)
+    params = AccumulateParams(extract=extract_params, line_model=line_model)
+    edges = EdgeSamples.of(read_truth(truth)) if truth else None
+    rows, skipped = [], 0
+    with Recording(recording, **recording_kwargs) as rec, _rerun(rrd, "accumulate") as viz, \
+            progress_bar(ctx, _frames_to_do(rec, frame_range), "accumulating") as bar:
+        acc = LineAccumulation(params, rec.object_frame, rec.camera_frame)
+        for frame in rec.frames(*frame_range):
+            bar(1)
+            if frame.T_camera_object is None:
+                log.warning("%s: frame %d: no pose (%s): skipped", recording, frame.index, frame.pose_problem)
+                skipped += 1
+                continue
+            step = acc.step(frame, frame.T_camera_object)
+            row = {"frame_index": frame.index, "timestamp_ns": frame.timestamp_ns, **step.stats.__dict__}
+            if edges is not None or viz:
+                model = acc.model()
+            if edges is not None:
+                row.update(score_segments(model.select(model.accepted), edges).as_dict())
+                row.pop("segments")
+            if viz:
+                viz.accumulation(step, model, row)
+            rows.append(row)
+        model = acc.model()
+    for path in outputs:
+        (write_ply if path.lower().endswith(".ply") else write_model)(path, model)
+    if history:
+        with atomic_open(history) as f:
+            f.writelines(json.dumps(r) + "\n" for r in rows)
+    n = len(rows)
+    click.echo(f"{n} frames accumulated" + (f", {skipped} skipped without a pose" if skipped else "")
+               + f": model of {len(model)} segments, {int(model.accepted.sum())} accepted (confidence >= 0.5)")
+    if n:
+        click.echo("time per frame: " + ", ".join(f"{k} {1000 * v / n:.1f} ms" for k, v in acc.times.seconds.items()))
+    if edges is not None and rows:
+        last = rows[-1]
+        click.echo(f"against {truth}: precision {last['precision']:.3f}, completeness {last['completeness']:.3f}, "
+                   f"background {last['background']:.3f}")
+    click.echo("wrote " + ", ".join([*outputs, *([rrd] if rrd else []), *([history] if history else [])]))
+
+
+# -- eval ------------------------------------------------------------------------------------------
+@main.command("eval")
+@click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False, exists=True))
+@click.option("--poses", type=click.Path(dir_okay=False, exists=True), help="Evaluate a poses file (accum track).")
+@click.option("--frames", "frames_file", type=click.Path(dir_okay=False, exists=True),
+              help="Evaluate a frames file (accum extract), frame by frame.")
+@click.option("--json", "as_json", is_flag=True, help="Print the figures as JSON.")
+@click.option("--position-tol", type=click.FloatRange(0.1, 100.0), default=4.0, show_default=True,
+              help="A correct segment's centre lies this near a truth edge, millimetres.")
+@click.option("--angle-tol", type=click.FloatRange(0.1, 90.0), default=10.0, show_default=True,
+              help="A correct segment's direction is this near the edge's, degrees.")
+@click.option("--background-dist", type=click.FloatRange(1.0, 1000.0), default=20.0, show_default=True,
+              help="Segments farther than this from every truth edge are background, millimetres.")
+@click.option("--min-seen", type=click.IntRange(1, 1000), default=3, show_default=True,
+              help="Completeness counts edge samples seen in at least this many frames.")
+def eval_(inputs, poses, frames_file, as_json, position_tol, angle_tol, background_dist, min_seen):
+    """Measure a model, frames or poses against a truth sidecar.
+
+    \b
+    Forms:
+      accum eval MODEL.json TRUTH.json        precision, completeness, background of the accepted segments
+      accum eval --frames FRAMES.jsonl TRUTH.json   single-frame accuracy and completeness
+      accum eval --poses POSES.json TRUTH.json      pose errors and tracked fraction
+    \b
+    Example:
+      accum eval out/model.json sample_data/sim_box.truth.json
+    """
+    from .evaluate import Tolerances, evaluate_frames, evaluate_model, pose_errors
+    from .model_io import read_frames, read_model, read_poses, read_truth
+
+    given = int(bool(poses)) + int(bool(frames_file))
+    if given > 1 or len(inputs) != 2 - given:
+        raise click.UsageError("expected MODEL.json TRUTH.json, or --poses/--frames FILE with TRUTH.json")
+    truth = read_truth(inputs[-1])
+    tol = Tolerances(position_tol / 1000.0, angle_tol, background_dist / 1000.0, min_seen)
+    if poses:
+        track = read_poses(poses)
+        figures = pose_errors(track.times_ns, track.poses, track.status, truth)
+    elif frames_file:
+        figures = evaluate_frames(((t, s) for t, s, _ in read_frames(frames_file)), truth, tol)
+    else:
+        figures = evaluate_model(read_model(inputs[0]), truth, tol)
+    if as_json:
+        click.echo(json.dumps(figures, indent=1))
+        return
+    for key, value in figures.items():
+        click.echo(f"{key:<28} {value:.4f}" if isinstance(value, float) else f"{key:<28} {value}")
 
 
 if __name__ == "__main__":

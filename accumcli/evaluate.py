@@ -162,3 +162,25 @@ def pose_errors(times_ns: np.ndarray, poses: np.ndarray, status: list, truth: Tr
         stats[f"median_{name}"] = float(np.median(values)) if values else float("nan")
         stats[f"max_{name}"] = float(np.max(values)) if values else float("nan")
     return stats
+
+
+def evaluate_frames(frames, truth: Truth, tol: Tolerances = Tolerances()) -> dict:
+    """Single-frame figures over ``frames`` (iterable of (timestamp_ns, Segments in the camera frame)),
+    placed with the truth's poses: the fraction of segments within the background distance of the
+    object that are correct, the mean single-frame completeness, and the background fraction."""
+    edges = EdgeSamples.of(truth, tol)
+    per_frame, near, correct, background, total = [], 0, 0, 0, 0
+    for t_ns, segments in frames:
+        T = truth.pose_at(int(t_ns))
+        if T is None:
+            continue
+        r = frame_accuracy(segments, T, edges, tol)
+        per_frame.append(r["completeness"])
+        near += r["near_object"]
+        correct += r["correct_near"]
+        background += r["background"]
+        total += r["segments"]
+    return {"frames": len(per_frame), "segments_per_frame": total / max(len(per_frame), 1),
+            "accuracy_near_object": correct / near if near else float("nan"),
+            "single_frame_completeness": float(np.mean(per_frame)) if per_frame else float("nan"),
+            "background": background / total if total else float("nan")}

@@ -23,17 +23,17 @@ Entities are ``Segments`` in the object frame with running sums in ``extra``:
   extends the segment instead of leaving a gap that neither neighbour covers
   (the metric forgives shifts of half a length, so the gap's own pieces
   confirm the neighbours and are never added);
-- ``view_sum`` (N, 3), ``view_spread`` (N,) radians: the directions (object
-  frame) from which the segment was confirmed, as their sum and the cone's
-  half-angle.
+- ``views`` (N, K, 3): up to K unit directions (object frame, segment to
+  camera) from which the segment was confirmed, at least ``view_step_deg``
+  apart (NaN where unused): the set of aspects in which it has been seen.
 
 Running sums are scaled down once their weight passes ``max_weight``, so a
 long-lived segment still follows new evidence.
 
 ``expected`` (beyond the paper): a model segment should be seen in a frame only
 if both its endpoints are in front of the camera and inside both images, it
-is not near the critical plane, and the camera looks at it from within its
-cone of confirmed views (plus ``aspect_margin_deg``). For a rigid object and
+is not near the critical plane, and the camera looks at it from within
+``aspect_margin_deg`` of a direction it was confirmed from. For a rigid object and
 gripper, what is visible depends on the viewing direction only, so a segment
 that turned away or behind the object is not punished.
 """
@@ -61,6 +61,8 @@ class LineModelParams:
     critical_angle_deg: float = 12.0
     image_margin_px: float = 5.0
     duplicate_shift: float = 0.25     # fraction of a length; closer centres along the line are duplicates
+    max_views: int = 8                # viewing directions kept per segment
+    view_step_deg: float = 10.0       # a new viewing direction is kept if this far from the stored ones
     max_extent: float = 1.6           # a model segment covers at most this many observation lengths
     reference_direction_sigma_deg: float = 2.0  # a direction this certain weighs as much as its confidence
 
@@ -82,8 +84,8 @@ class LineSegmentType:
     def empty(self, frame_id: str) -> Segments:
         s = Segments.empty(frame_id)
         s.extra = {"info": np.zeros((0, 3, 3)), "info_vec": np.zeros((0, 3)), "anchor": np.zeros(0),
-                   "dir_sum": np.zeros((0, 3)), "weight": np.zeros(0), "view_sum": np.zeros((0, 3)),
-                   "view_spread": np.zeros(0)}
+                   "dir_sum": np.zeros((0, 3)), "weight": np.zeros(0),
+                   "views": np.zeros((0, self.params.max_views, 3))}
         return s
 
     def size(self, entities: Segments) -> int:
@@ -136,7 +138,7 @@ class LineSegmentType:
         direction_weight = w * (np.radians(p.reference_direction_sigma_deg) / np.maximum(sigma_direction, 1e-3)) ** 2
         out.extra = {"info": info, "info_vec": np.einsum("nij,nj->ni", info, observed.centers), "anchor": anchor,
                      "dir_sum": u * direction_weight[:, None], "weight": w,
-                     "view_sum": ray, "view_spread": np.zeros(len(observed))}
+                     "views": _new_views(ray, self.params.max_views)}
         return out
 
     def merge(self, model: Segments, observed: Segments, mi: np.ndarray, oi: np.ndarray,
@@ -157,11 +159,10 @@ class LineSegmentType:
         extra["info_vec"][mi] += o["info_vec"][oi] - np.einsum("nij,nj->ni", along, observed.centers[oi])
         extra["dir_sum"][mi] += o["dir_sum"][oi] * sign[:, None]
         extra["weight"][mi] += o["weight"][oi]
-        old_view = _unit(x["view_sum"][mi])
-        extra["view_sum"][mi] += o["view_sum"][oi]
-        new_view = _unit(extra["view_sum"][mi])
-        extra["view_spread"][mi] = np.maximum(x["view_spread"][mi] + _angle(old_view, new_view),
-                                              _angle(o["view_sum"][oi], new_view))
+        views = x["views"][mi]
+        for k in range(o["views"].shape[1]):
+            views = _add_view(views, o["views"][oi, k], np.radians(self.params.view_step_deg))
+        extra["views"][mi] = views
         centers = model.centers.copy()
         solved = np.linalg.solve(extra["info"][mi], extra["info_vec"][mi][:, :, None])[:, :, 0]
         directions = model.directions.copy()
@@ -198,9 +199,31 @@ class LineSegmentType:
         not_critical = angle >= p.critical_angle_deg + 3.0
         camera_in_object = invert(T)[:3, 3]
         view = _unit(camera_in_object - model.centers)
-        in_aspect = _angle(view, _unit(model.extra["view_sum"])) <= model.extra["view_spread"] + np.radians(
-            p.aspect_margin_deg)
+        cosines = np.einsum("nkj,nj->nk", model.extra["views"], view)
+        in_aspect = np.nanmax(np.where(np.isnan(cosines), -1.0, cosines), axis=1) >= np.cos(
+            np.radians(p.aspect_margin_deg))
         return inside & not_critical & in_aspect
+
+
+def _new_views(ray: np.ndarray, max_views: int) -> np.ndarray:
+    views = np.full((len(ray), max_views, 3), np.nan)
+    views[:, 0] = ray
+    return views
+
+
+def _add_view(views: np.ndarray, new: np.ndarray, step: float) -> np.ndarray:
+    """Add unit directions ``new`` (M, 3) to view sets (M, K, 3) where they are farther than
+    ``step`` from every stored one: into a free slot, or else in place of the nearest."""
+    views = views.copy()
+    cosines = np.einsum("mkj,mj->mk", views, new)
+    valid = ~np.isnan(cosines)
+    nearest = np.argmax(np.where(valid, cosines, -2.0), axis=1)
+    novel = ~np.isnan(new[:, 0]) & (np.max(np.where(valid, cosines, -2.0), axis=1) < np.cos(step))
+    free = ~valid.all(axis=1)
+    slot = np.where(free, np.argmax(~valid, axis=1), nearest)
+    rows = np.flatnonzero(novel)
+    views[rows, slot[rows]] = new[rows]
+    return views
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -217,9 +240,14 @@ def to_model(entities: Segments, confidence: np.ndarray, observations: np.ndarra
     of its position across its direction (m)."""
     extra = entities.extra
     covariance = np.linalg.inv(extra["info"]) if len(entities) else np.zeros((0, 3, 3))
+    views = extra["views"]
+    mean_view = _unit(np.nansum(views, axis=1))
+    cosines = np.einsum("nkj,nj->nk", views, mean_view)
+    spread = np.degrees(np.arccos(np.clip(np.nanmin(np.where(np.isnan(cosines), 1.0, cosines), axis=1), -1, 1))) \
+        if len(entities) else np.zeros(0)
     u = entities.directions
     across = np.trace(covariance, axis1=1, axis2=2) - np.einsum("ni,nij,nj->n", u, covariance, u)
     return Segments(entities.frame_id, entities.centers, entities.directions, entities.lengths,
                     np.asarray(confidence, float), np.asarray(observations, np.int64),
-                    {"view_direction": _unit(extra["view_sum"]), "view_spread_deg": np.degrees(extra["view_spread"]),
+                    {"view_direction": mean_view, "view_spread_deg": spread,
                      "sigma_m": np.sqrt(np.maximum(across, 0) / 2)})

@@ -68,7 +68,8 @@ class Segments2D:
     int8, the gradient points along +normal (1) or -normal (-1), normal =
     (-dv, du); contrast: (N,) mean gradient magnitude, grey levels per pixel;
     line_id: (N,) int, the Hough (or LSD) line the segment lies on; t: (N,)
-    position along that line, px.
+    position along that line, px; line_direction: (N, 2) unit direction of
+    that whole line's fit (steadier than the local segment's own).
     """
 
     centers: np.ndarray
@@ -78,6 +79,7 @@ class Segments2D:
     contrast: np.ndarray
     line_id: np.ndarray
     t: np.ndarray
+    line_direction: np.ndarray
 
     def __len__(self) -> int:
         return len(self.centers)
@@ -360,7 +362,7 @@ def local_segments(points: EdgePoints, labels: np.ndarray, params: LineParams) -
     seg_t = np.sum((centers[ok] - line_center[group_line[ok]]) * line_dir[group_line[ok]], axis=1)
     return Segments2D(centers=centers[ok], directions=directions, lengths=np.full(int(ok.sum()), L),
                       polarity=(group_polarity[ok] * sign).astype(np.int8), contrast=(sw / np.maximum(count, 1))[ok],
-                      line_id=group_line[ok], t=seg_t)
+                      line_id=group_line[ok], t=seg_t, line_direction=_canonical(line_dir[group_line[ok]]))
 
 
 def _complete_junctions(t_lo, t_hi, centers, directions, line, params: LineParams):
@@ -398,7 +400,7 @@ def _complete_junctions(t_lo, t_hi, centers, directions, line, params: LineParam
 
 def _empty() -> Segments2D:
     return Segments2D(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), np.zeros(0, np.int8), np.zeros(0),
-                      np.zeros(0, np.int64), np.zeros(0))
+                      np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 2)))
 
 
 def detect_hough(image: np.ndarray, params: LineParams, grad: Gradients | None = None,
@@ -453,7 +455,7 @@ def detect_lsd(image: np.ndarray, params: LineParams, grad: Gradients | None = N
     gy = sample(grad.gy, centers[:, 0], centers[:, 1])
     along_normal = gx * normals[:, 0] + gy * normals[:, 1]
     segments = Segments2D(centers, directions, np.full(len(line), L), np.where(along_normal >= 0, 1, -1)
-                          .astype(np.int8), np.abs(along_normal), line, t)
+                          .astype(np.int8), np.abs(along_normal), line, t, directions)
     times.add("local segments", t0)
     return segments.select(segments.contrast >= params.gradient_threshold / 2)
 

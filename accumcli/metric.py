@@ -28,7 +28,7 @@ from scipy.spatial import cKDTree
 @dataclass(frozen=True)
 class MetricThresholds:
     s_p: float = 0.003              # metres
-    s_o_deg: float = 10.0           # degrees
+    s_o_deg: float = 7.0            # degrees
 
 
 def d_o(u: np.ndarray, u_other: np.ndarray) -> np.ndarray:

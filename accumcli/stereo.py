@@ -35,8 +35,9 @@ least-squares fit of disparity along that stretch (outliers beyond
 a 3D direction that a single short segment could not: at 0.5 m with an 8 cm
 baseline one pixel of disparity is 5 mm of depth, so a 15 px segment's own
 endpoints tilt it by degrees. A segment alone on its stretch keeps its own
-disparity and takes its direction from the intersection of the two
-back-projected planes. Each segment carries the standard deviations of its
+disparity and takes its direction from the intersection of the two planes
+back-projected through its left and right Hough lines (their whole fits, not
+the short pieces). Each segment carries the standard deviations of its
 depth (``sigma_depth_m``, from the fit's residuals) and of its direction
 (``sigma_direction_rad``: the fitted slope's uncertainty over the segment's
 length, or ``single_direction_sigma_deg`` for a segment alone).
@@ -72,7 +73,8 @@ class StereoParams:
     propagate_score: float = 0.0
     fit_outlier_px: float = 1.0
     default_disparity_sigma_px: float = 0.25
-    single_direction_sigma_deg: float = 10.0  # direction uncertainty of a segment alone on its stretch
+    single_direction_sigma_deg: float = 6.0  # direction uncertainty of a segment alone on its stretch
+    fitted_only: bool = False            # drop segments whose stretch is too short to fit
 
 
 @dataclass
@@ -263,8 +265,8 @@ def triangulate(left: Segments2D, right: Segments2D, m: Matches, intr: StereoInt
         residual = m.disparity - (a[stretch] + b[stretch] * s)
         fitted = (count[stretch] >= 3) & (spread[stretch] >= left.lengths[m.left])
         keep = ~fitted | (np.abs(residual) <= params.fit_outlier_px)
-    use = keep
     fitted = fitted & keep
+    use = fitted if params.fitted_only else keep
     idx = np.flatnonzero(use)
     half = (left.lengths[m.left] / 2)[:, None] * dirs
     along = np.sum(dirs * axis[stretch], axis=1) * left.lengths[m.left] / 2
@@ -333,7 +335,7 @@ def _plane_intersection(left: Segments2D, right: Segments2D, m: Matches, intr: S
     def plane_normal(seg: Segments2D, index: np.ndarray) -> np.ndarray:
         c = np.column_stack([seg.centers[index], np.ones(len(index))])
         e = c.copy()
-        e[:, :2] += seg.directions[index]
+        e[:, :2] += seg.line_direction[index]
         return np.cross(c @ K_inv.T, e @ K_inv.T)
 
     direction = np.cross(plane_normal(left, m.left), plane_normal(right, m.right))

@@ -41,7 +41,7 @@ RAW_MARGIN_PX = 40
 
 @dataclass(frozen=True)
 class SimulationOptions:
-    frames: int = 24
+    frames: int = 36
     width: int = 640
     height: int = 480
     shape: str = "box"

@@ -1,0 +1,164 @@
+"""Rerun logging: the only module that imports rerun (rerun-sdk 0.41).
+
+One ``RerunLog`` wraps one ``rr.RecordingStream`` (never the global one) with
+exactly one sink: an .rrd file, a spawned viewer, or a viewer at a gRPC URL.
+
+Entity tree (``world`` is the left camera frame for ``extract``, the object
+frame for ``accumulate``; optical axes, ``ViewCoordinates.RDF``)::
+
+    world/camera                     Transform3D (camera pose in world) + Pinhole
+    world/camera/image               left image; .../segments its 2D segments
+    world/frame_segments             this frame's 3D segments
+    world/model/{accepted,tentative} the model by confidence
+    world/trajectory                 camera or object positions
+    images/right, images/right/segments
+    stats/<name>                     one time series per count
+
+Timelines: ``frame`` (sequence: the frame index) and ``time`` (timestamp).
+Rerun puts pixel centres at half-integers, accum at integers (see the package
+docstring), so 2D overlays and the principal point are shifted by +0.5 px.
+"""
+
+from __future__ import annotations
+
+import uuid
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from .geometry import invert, transform_points
+
+PIXEL = 0.5  # accum pixel (u, v) + PIXEL = rerun pixel coordinate
+MATCHED, UNMATCHED = (40, 200, 60), (255, 140, 0)  # RGB of 2D segments with / without a 3D partner
+FRAME_SEGMENTS = (230, 90, 30)
+ACCUMULATE_STATS = ("size", "accepted", "confirmed", "new", "pruned", "precision", "completeness", "background")
+KINDS = ("extract", "accumulate", "track", "view")
+
+
+def blueprint(kind: str) -> rrb.Blueprint:
+    """Layout for ``kind``: the 3D world, the left image with its overlays (and the
+    model projected into it), the right image, and time series of ``stats/*``
+    for ``accumulate`` and ``track``."""
+    if kind not in KINDS:
+        raise ValueError(f"unknown kind {kind!r}, expected one of {KINDS}")
+    world = rrb.Spatial3DView(origin="world", name="world")
+    left = rrb.Spatial2DView(origin="world/camera", contents=["$origin/**", "/world/model/**"], name="left image")
+    right = rrb.Spatial2DView(origin="images/right", name="right image")
+    images = rrb.Vertical(left, right)
+    if kind in ("accumulate", "track"):
+        layout = rrb.Horizontal(world, rrb.Vertical(left, rrb.TimeSeriesView(origin="stats", name="counts")),
+                                column_shares=[3, 2])
+    else:
+        layout = rrb.Horizontal(world, images, column_shares=[3, 2])
+    return rrb.Blueprint(layout, collapse_panels=True)
+
+
+def _strips(endpoints: np.ndarray) -> np.ndarray:
+    """(N, 2, D) endpoints as float32 line strips of two points each."""
+    return np.asarray(endpoints, np.float32).reshape(-1, 2, endpoints.shape[-1])
+
+
+class RerunLog:
+    """Logs accum's frames, segments and models to one Rerun recording."""
+
+    def __init__(self, app: str, rrd: str | None = None, kind: str = "view", spawn: bool = False,
+                 connect: str | None = None):
+        """``app``: application id; exactly one of ``rrd`` (file path, works headless),
+        ``spawn`` (start a viewer) or ``connect`` (gRPC URL, e.g.
+        ``rerun+http://127.0.0.1:9876/proxy``)."""
+        if (rrd is not None) + bool(spawn) + (connect is not None) != 1:
+            raise ValueError("RerunLog needs exactly one sink: rrd, spawn or connect")
+        layout = blueprint(kind)
+        self.rec = rr.RecordingStream(app, recording_id=uuid.uuid4())
+        if rrd is not None:
+            self.rec.save(str(rrd))
+        elif spawn:
+            self.rec.spawn()
+        else:
+            self.rec.connect_grpc(connect)
+        self.rec.send_blueprint(layout)
+        self.rec.log("world", rr.ViewCoordinates.RDF, static=True)
+
+    def set_frame(self, index: int, timestamp_ns: int) -> None:
+        """Timelines ``frame`` (sequence) and ``time`` (timestamp, nanoseconds since the epoch)."""
+        self.rec.set_time("frame", sequence=int(index))
+        self.rec.set_time("time", timestamp=np.datetime64(int(timestamp_ns), "ns"))
+
+    def camera(self, intrinsics, T_world_camera: np.ndarray | None = None) -> None:
+        """``world/camera``: its pose (if given) and a pinhole from ``StereoIntrinsics`` (left camera)."""
+        if T_world_camera is not None:
+            self.rec.log("world/camera", rr.Transform3D(translation=T_world_camera[:3, 3],
+                                                        mat3x3=T_world_camera[:3, :3]))
+        K = intrinsics.K.copy()
+        K[:2, 2] += PIXEL
+        self.rec.log("world/camera", rr.Pinhole(image_from_camera=K, resolution=[intrinsics.width, intrinsics.height],
+                                                camera_xyz=rr.ViewCoordinates.RDF))
+
+    def images(self, frame) -> None:
+        """The rectified left image on ``world/camera/image``, the right one on ``images/right``."""
+        self.rec.log("world/camera/image", rr.Image(frame.left))
+        self.rec.log("images/right", rr.Image(frame.right))
+
+    def segments_2d(self, result) -> None:
+        """2D segments of a ``FrameSegments`` in both images; those that became 3D segments in MATCHED colour."""
+        for path, segs, used in (("world/camera/image/segments", result.left, result.left_index),
+                                 ("images/right/segments", result.right, result.right_index)):
+            matched = np.zeros(len(segs), bool)
+            matched[np.asarray(used, int)] = True
+            colors = np.where(matched[:, None], MATCHED, UNMATCHED).astype(np.uint8)
+            self.rec.log(path, rr.LineStrips2D(_strips(segs.endpoints() + PIXEL), colors=colors,
+                                               radii=rr.Radius.ui_points(1.0), draw_order=10.0))
+
+    def segments_3d(self, path: str, segments, T_world_frame: np.ndarray) -> None:
+        """``segments`` (in their frame) as line strips in world; ``T_world_frame`` maps their frame into world."""
+        ends = transform_points(T_world_frame, segments.endpoints().reshape(-1, 3)).reshape(-1, 2, 3)
+        self.rec.log(path, rr.LineStrips3D(_strips(ends), colors=FRAME_SEGMENTS, radii=rr.Radius.ui_points(1.0)))
+
+    def model(self, model, T_world_object: np.ndarray = np.eye(4)) -> None:
+        """The model (object frame) in world: accepted segments blue, tentative ones light grey,
+        each darker the more confident."""
+        c = model.confidence[:, None]
+        blue = np.column_stack([60 * (1 - c), 60 + 100 * (1 - c), 140 + 115 * (1 - c)])
+        grey = np.repeat(230 - 120 * c, 3, axis=1)
+        colors = np.where(model.accepted[:, None], blue, grey).astype(np.uint8)
+        ends = transform_points(T_world_object, model.endpoints().reshape(-1, 3)).reshape(-1, 2, 3)
+        for name, keep, width in (("accepted", model.accepted, 2.0), ("tentative", ~model.accepted, 1.0)):
+            self.rec.log(f"world/model/{name}", rr.LineStrips3D(_strips(ends[keep]), colors=colors[keep],
+                                                                radii=rr.Radius.ui_points(width)))
+
+    def scalars(self, values: dict) -> None:
+        """One ``stats/<name>`` time series per finite numeric value."""
+        for name, value in values.items():
+            if isinstance(value, (int, float, np.number)) and not isinstance(value, bool) and np.isfinite(value):
+                self.rec.log(f"stats/{name}", rr.Scalars(float(value)))
+
+    def trajectory(self, positions: np.ndarray) -> None:
+        """``positions``: (N, 3) metres in world, as one line strip."""
+        self.rec.log("world/trajectory", rr.LineStrips3D([np.asarray(positions, np.float32)],
+                                                         colors=(120, 120, 255), radii=rr.Radius.ui_points(1.0)))
+
+    def extraction(self, frame, result) -> None:
+        """One frame of ``accum extract``: world = left camera frame."""
+        self.set_frame(frame.index, frame.timestamp_ns)
+        self.camera(frame.intrinsics, np.eye(4))
+        self.images(frame)
+        self.segments_2d(result)
+        self.segments_3d("world/frame_segments", result.segments, np.eye(4))
+
+    def accumulation(self, step, model, row: dict) -> None:
+        """One frame of ``accum accumulate``: world = object frame; ``model`` in it; counts from ``row``."""
+        frame = step.frame
+        T_object_camera = invert(step.T_camera_object)
+        self.set_frame(frame.index, frame.timestamp_ns)
+        self.camera(frame.intrinsics, T_object_camera)
+        self.images(frame)
+        self.segments_2d(step.extraction)
+        self.segments_3d("world/frame_segments", step.extraction.segments, T_object_camera)
+        self.model(model)
+        self.scalars({k: row[k] for k in ACCUMULATE_STATS if k in row})
+
+    def close(self) -> None:
+        """Flush everything to the sink and detach from it (an .rrd is complete afterwards)."""
+        self.rec.flush()
+        self.rec.disconnect()

@@ -1,0 +1,158 @@
+"""Rerun logging (accumcli.visualize): log synthetic frames to an .rrd and read it back
+with the SDK's own reader. Never spawns or connects to a viewer."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from rerun.chunk import RrdReader
+
+from accumcli.accumulate import StepStats
+from accumcli.geometry import invert, transform_points
+from accumcli.pipeline import AccumulationStep
+from accumcli.visualize import RerunLog
+
+from .test_render import cube_model, frame_and_extraction
+
+
+def read_rrd(path, timeline: str = "frame") -> tuple[set[str], int]:
+    """(entity paths without the leading "/", number of distinct times on ``timeline``) of the
+    first recording in the .rrd at ``path``."""
+    paths, times = set(), set()
+    for chunk in RrdReader(path).stream():
+        paths.add(chunk.entity_path.lstrip("/"))
+        if timeline in chunk.timeline_names:
+            times.update(chunk.to_record_batch().column(timeline).to_pylist())
+    return paths, len(times)
+
+
+def rrd_column(path, entity: str, component: str) -> list:
+    """Every row of ``component`` (e.g. "Scalars:scalars") logged on ``entity``, in row order."""
+    rows = []
+    for chunk in RrdReader(path).stream():
+        batch = chunk.to_record_batch()
+        if chunk.entity_path.lstrip("/") == entity and component in batch.schema.names:
+            rows += batch.column(component).to_pylist()
+    return rows
+
+
+def accumulation_steps(n: int):
+    """(step, model, row) of ``n`` synthetic frames: a cube whose confidence grows frame by frame."""
+    model = cube_model()
+    for i in range(n):
+        frame, result = frame_and_extraction(i, model)
+        stats = StepStats(observed=len(model), confirmed=10 * i, missed=0, new=len(model) - 10 * i, pruned=i,
+                          merged=0, size=len(model), accepted=int(model.accepted.sum()))
+        step = AccumulationStep(frame, result, frame.T_camera_object, stats)
+        row = {"frame_index": i, "timestamp_ns": frame.timestamp_ns, **stats.__dict__,
+               "precision": 0.9, "completeness": 0.1 * i, "background": float("nan")}
+        yield step, model, row
+
+
+def test_accumulation_rrd(tmp_path):
+    path = tmp_path / "run.rrd"
+    log = RerunLog("accum test", rrd=str(path), kind="accumulate")
+    for step, model, row in accumulation_steps(3):
+        log.accumulation(step, model, row)
+    log.close()
+    paths, frames = read_rrd(path)
+    expected = {"world", "world/camera", "world/camera/image", "world/camera/image/segments", "images/right",
+                "images/right/segments", "world/frame_segments", "world/model/accepted", "world/model/tentative",
+                "stats/size", "stats/accepted", "stats/confirmed", "stats/new", "stats/pruned", "stats/precision",
+                "stats/completeness"}
+    assert expected <= paths, expected - paths
+    assert "stats/background" not in paths  # NaN is not logged
+    assert "stats/frame_index" not in paths and "stats/missed" not in paths
+    assert frames == 3
+    assert read_rrd(path, "time")[1] == 3
+    assert [v[0] for v in rrd_column(path, "stats/confirmed", "Scalars:scalars")] == [0.0, 10.0, 20.0]
+    # The camera pose is the inverse of T_camera_object: world is the object frame.
+    translations = rrd_column(path, "world/camera", "Transform3D:translation")
+    assert len(translations) == 3
+    step = next(accumulation_steps(1))[0]
+    assert np.allclose(translations[0][0], invert(step.T_camera_object)[:3, 3], atol=1e-6)
+
+
+def test_frame_segments_are_in_world(tmp_path):
+    path = tmp_path / "one.rrd"
+    log = RerunLog("accum test", rrd=str(path), kind="accumulate")
+    step, model, row = next(accumulation_steps(1))
+    log.accumulation(step, model, row)
+    log.close()
+    strips = rrd_column(path, "world/frame_segments", "LineStrips3D:strips")[0]
+    # Frame segments (camera frame) mapped back into the object frame land on the model.
+    world = np.array(strips, float).reshape(-1, 3)
+    assert np.allclose(world, model.endpoints().reshape(-1, 3), atol=1e-5)
+    accepted = rrd_column(path, "world/model/accepted", "LineStrips3D:strips")[0]
+    tentative = rrd_column(path, "world/model/tentative", "LineStrips3D:strips")[0]
+    assert len(accepted) == model.accepted.sum() and len(tentative) == (~model.accepted).sum()
+
+
+def test_extraction_rrd(tmp_path):
+    path = tmp_path / "extract.rrd"
+    log = RerunLog("accum test", rrd=str(path), kind="extract")
+    model = cube_model()
+    for i in range(2):
+        log.extraction(*frame_and_extraction(i, model))
+    log.close()
+    paths, frames = read_rrd(path)
+    expected = {"world", "world/camera", "world/camera/image", "world/camera/image/segments", "images/right",
+                "images/right/segments", "world/frame_segments"}
+    assert expected <= paths, expected - paths
+    assert not any(p.startswith(("stats", "world/model")) for p in paths)
+    assert frames == 2
+    # Left 2D segments: the matched ones and the one unmatched in two colours, shifted to Rerun's pixel centres.
+    frame, result = frame_and_extraction(0, model)
+    colors = rrd_column(path, "world/camera/image/segments", "LineStrips2D:colors")[0]
+    assert len(set(colors)) == 2 and colors.count(colors[-1]) == 1
+    strips = rrd_column(path, "world/camera/image/segments", "LineStrips2D:strips")[0]
+    assert np.allclose(np.array(strips[0]), result.left.endpoints()[0] + 0.5, atol=1e-4)
+    # World is the left camera frame: the 3D segments are logged as extracted.
+    world = np.array(rrd_column(path, "world/frame_segments", "LineStrips3D:strips")[0]).reshape(-1, 3)
+    assert np.allclose(world, transform_points(np.eye(4), result.segments.endpoints().reshape(-1, 3)), atol=1e-5)
+
+
+def blueprint_views(path) -> list[str]:
+    """Sorted class identifiers ("2D", "3D", "TimeSeries", ...) of the views in the .rrd's blueprint."""
+    reader = RrdReader(path)
+    (store,) = reader.blueprints()
+    views = []
+    for chunk in reader.stream(store=store):
+        batch = chunk.to_record_batch()
+        if "ViewBlueprint:class_identifier" in batch.schema.names:
+            views += [row[0] for row in batch.column("ViewBlueprint:class_identifier").to_pylist()]
+    return sorted(views)
+
+
+@pytest.mark.parametrize("kind, views", [("accumulate", ["2D", "3D", "TimeSeries"]),
+                                         ("track", ["2D", "3D", "TimeSeries"]),
+                                         ("extract", ["2D", "2D", "3D"]), ("view", ["2D", "2D", "3D"])])
+def test_blueprint_is_saved(tmp_path, kind, views):
+    path = tmp_path / "bp.rrd"
+    RerunLog("accum test", rrd=str(path), kind=kind).close()
+    assert len(RrdReader(path).recordings()) == 1
+    assert blueprint_views(path) == views
+
+
+def test_exactly_one_sink(tmp_path):
+    with pytest.raises(ValueError):
+        RerunLog("accum test", kind="view")
+    with pytest.raises(ValueError):
+        RerunLog("accum test", rrd=str(tmp_path / "x.rrd"), connect="rerun+http://127.0.0.1:9/proxy")
+    with pytest.raises(ValueError):
+        RerunLog("accum test", rrd=str(tmp_path / "x.rrd"), kind="nonsense")
+
+
+def test_trajectory_and_scalars(tmp_path):
+    path = tmp_path / "track.rrd"
+    log = RerunLog("accum test", rrd=str(path), kind="track")
+    for i in range(4):
+        log.set_frame(i, 10 ** 9 + i)
+        log.scalars({"inliers": i, "ok": True, "status": "tracking", "error_mm": np.float32(0.5)})
+    log.trajectory(np.arange(12.0).reshape(4, 3))
+    log.close()
+    paths, frames = read_rrd(path)
+    assert {"stats/inliers", "stats/error_mm", "world/trajectory"} <= paths
+    assert "stats/ok" not in paths and "stats/status" not in paths
+    assert frames == 4
+    assert np.allclose(rrd_column(path, "world/trajectory", "LineStrips3D:strips")[0], np.arange(12.0).reshape(4, 3))
