@@ -103,28 +103,43 @@ def _legend(canvas: np.ndarray, n: int, accepted: int, metres_per_px: float | No
         cv2.putText(canvas, label, (w - 12 - px, h - 22), FONT, scale, (0, 0, 0), 1, cv2.LINE_AA)
 
 
+def _fit_points(model) -> np.ndarray:
+    """(M, 3) endpoints a default view is fitted to: the accepted segments' when there are any
+    (tentative ones are mostly background clutter and may fall outside the picture), else all."""
+    ends = model.endpoints()
+    return (ends[model.accepted] if model.accepted.any() else ends).reshape(-1, 3)
+
+
+def fitted_view(model, size: tuple[int, int] = (640, 480)) -> tuple[np.ndarray, np.ndarray]:
+    """(T_view_object (4, 4), K (3, 3)): ``default_view`` and ``fit_intrinsics`` for a
+    (W, H) = ``size`` picture, fitted to the accepted segments (all if none is accepted)."""
+    points = _fit_points(model)
+    T = default_view(points)
+    return T, fit_intrinsics(transform_points(T, points), size)
+
+
 def render_model(model, size: tuple[int, int] = (640, 480), T_view_object: np.ndarray | None = None,
                  intrinsics=None, legend: bool = True) -> np.ndarray:
     """The model's segments (object frame) seen by a pinhole camera: (H, W, 3) uint8, white background.
 
     size: (W, H) px. T_view_object: pose of the object in the (optical) view
-    camera; by default ``default_view``. intrinsics: anything with a (3, 3)
-    ``K`` (e.g. ``StereoIntrinsics``); by default a K that makes the model fill
-    80% of the picture (above the legend). Grey = 255 (1 - confidence), clipped to [0, 230].
-    ``legend`` adds counts, a confidence ramp and a scale bar.
+    camera, by default ``default_view``. intrinsics: anything with a (3, 3)
+    ``K`` (e.g. ``StereoIntrinsics``); by default a K at which the accepted
+    segments (all if none is) fill 80% of the picture above the legend.
+    Grey = 255 (1 - confidence), clipped to [0, 230]; ``legend`` adds counts, a
+    confidence ramp and a scale bar (at the median depth of the segments fitted to).
     """
     w, h = size
-    ends = model.endpoints()
-    T = default_view(ends.reshape(-1, 3)) if T_view_object is None else T_view_object
-    ends_view = transform_points(T, ends.reshape(-1, 3)).reshape(-1, 2, 3)
-    if intrinsics is not None:
-        K = intrinsics.K
-    else:
-        K = fit_intrinsics(ends_view.reshape(-1, 3), (w, h - LEGEND_BAND if legend else h))
+    points = _fit_points(model)
+    T = default_view(points) if T_view_object is None else T_view_object
+    K = intrinsics.K if intrinsics is not None else \
+        fit_intrinsics(transform_points(T, points), (w, h - LEGEND_BAND if legend else h))
+    ends_view = transform_points(T, model.endpoints().reshape(-1, 3)).reshape(-1, 2, 3)
     canvas = np.full((h, w, 3), 255, np.uint8)
     draw_segments(canvas, ends_view, K, confidence_grey(model.confidence))
     if legend:
-        z = ends_view[..., 2][ends_view[..., 2] > NEAR]
+        z = transform_points(T, points)[:, 2]
+        z = z[z > NEAR]
         _legend(canvas, len(model), int(model.accepted.sum()), float(np.median(z)) / K[0, 0] if len(z) else None)
     return canvas
 

@@ -37,9 +37,9 @@ KINDS = ("extract", "accumulate", "track", "view")
 
 
 def blueprint(kind: str) -> rrb.Blueprint:
-    """Layout for ``kind``: the 3D world, the left image with its overlays (and the
-    model projected into it), the right image, and time series of ``stats/*``
-    for ``accumulate`` and ``track``."""
+    """Layout for ``kind``: the 3D world and the left image with its overlays (and the
+    model projected into it); beside them the right image (``extract``, ``view``)
+    or time series of ``stats/*`` (``accumulate``, ``track``)."""
     if kind not in KINDS:
         raise ValueError(f"unknown kind {kind!r}, expected one of {KINDS}")
     world = rrb.Spatial3DView(origin="world", name="world")

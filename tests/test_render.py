@@ -12,7 +12,7 @@ from accumcli.extract import FrameSegments
 from accumcli.geometry import make_transform
 from accumcli.lines2d import Segments2D
 from accumcli.recording import StereoFrame, StereoIntrinsics
-from accumcli.render import LEGEND_BAND, default_view, fit_intrinsics, render_frame_panel, render_model, write_png
+from accumcli.render import LEGEND_BAND, fitted_view, render_frame_panel, render_model, write_png
 from accumcli.segments import Segments
 
 INTRINSICS = StereoIntrinsics(fx=60.0, fy=60.0, cx=31.5, cy=23.5, baseline=0.08, width=64, height=48)
@@ -84,24 +84,29 @@ def non_white(image: np.ndarray) -> np.ndarray:
     return (image < 250).any(axis=2)
 
 
-def test_render_model_not_blank_and_fills_the_picture():
+def test_render_model_not_blank_and_fits_the_accepted_segments():
     model = cube_model()
     image = render_model(model, size=(320, 240), legend=False)
     assert image.shape == (240, 320, 3) and image.dtype == np.uint8
-    ink = non_white(image)
-    assert ink.sum() > 500
-    rows, cols = np.nonzero(ink)
+    assert non_white(image).sum() > 500
+    rows, cols = np.nonzero(image.mean(axis=2) < 100)  # accepted segments only (tentative ones are light)
     width, height = (cols.max() - cols.min()) / 320, (rows.max() - rows.min()) / 240
-    assert 0.65 < max(width, height) < 0.9  # fit to ~80% of the picture
-    assert abs((cols.max() + cols.min()) / 2 - 159.5) < 20  # centred
+    assert 0.7 < max(width, height) < 0.85  # fitted to ~80% of the picture
+    assert abs((cols.max() + cols.min()) / 2 - 159.5) < 10 and abs((rows.max() + rows.min()) / 2 - 119.5) < 10
+
+
+def test_default_view_fits_all_segments_without_accepted_ones():
+    model = cube_model(confident_faces=())
+    assert not model.accepted.any()
+    rows, cols = np.nonzero(non_white(render_model(model, size=(320, 240), legend=False)))
+    assert 0.7 < max((cols.max() - cols.min()) / 320, (rows.max() - rows.min()) / 240) < 0.85
 
 
 def fixed_view(model: Segments, size=(320, 240)):
-    """(T_view_object, an object with K): the default view of the whole model, fixed so that
+    """(T_view_object, an object with K): the default view of ``model``, fixed so that
     renderings of parts of it line up with renderings of all of it."""
-    T = default_view(model.endpoints().reshape(-1, 3))
-    ends_view = model.endpoints().reshape(-1, 3) @ T[:3, :3].T + T[:3, 3]
-    return T, type("Pinhole", (), {"K": fit_intrinsics(ends_view, size)})()
+    T, K = fitted_view(model, size)
+    return T, type("Pinhole", (), {"K": K})()
 
 
 def test_confident_segments_are_darker_than_tentative_ones():
@@ -132,10 +137,8 @@ def test_accepted_segments_lie_on_top_where_they_cross():
 
 def test_legend_keeps_clear_of_the_model():
     model = cube_model()
-    T = default_view(model.endpoints().reshape(-1, 3))
-    ends_view = model.endpoints().reshape(-1, 3) @ T[:3, :3].T + T[:3, 3]
-    above_band = type("Pinhole", (), {"K": fit_intrinsics(ends_view, (320, 240 - LEGEND_BAND))})()
-    model_only = render_model(model, (320, 240), T, above_band, legend=False)
+    T, pinhole = fixed_view(model, (320, 240 - LEGEND_BAND))
+    model_only = render_model(model, (320, 240), T, pinhole, legend=False)
     with_legend = render_model(model, (320, 240))
     assert not non_white(model_only)[-LEGEND_BAND:].any()
     assert np.array_equal(with_legend[:-LEGEND_BAND], model_only[:-LEGEND_BAND])

@@ -1,0 +1,52 @@
+"""Stereo matching and triangulation against rendered scenes with exact geometry."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from accumcli.extract import ExtractParams, extract_frame
+
+from .scenes import render_pair, quad, rotated_square
+
+
+def test_fronto_parallel_edge_at_half_a_metre_within_a_millimetre():
+    # a dark rectangle 0.5 m away; its left and right sides are vertical 3D lines at x = -0.04 and x = 0.05
+    rect = quad([[-0.04, -0.06, 0.5], [0.05, -0.06, 0.5], [0.05, 0.06, 0.5], [-0.04, 0.06, 0.5]])
+    frame = render_pair([rect], seed=1)
+    result = extract_frame(frame, ExtractParams())
+    seg = result.segments
+    for x_edge in (-0.04, 0.05):
+        on = (np.abs(seg.centers[:, 0] - x_edge) < 0.005) & (np.abs(seg.centers[:, 1]) < 0.05)
+        assert on.sum() >= 4
+        errors = np.hypot(seg.centers[on, 0] - x_edge, seg.centers[on, 2] - 0.5)
+        print(f"edge x={x_edge}: {on.sum()} segments, max error {1000 * errors.max():.3f} mm")
+        assert errors.max() < 0.001
+        assert np.all(np.abs(seg.directions[on, 1]) > np.cos(np.radians(2)))
+
+
+def test_edge_along_the_epipolar_lines_is_rejected_as_critical():
+    # a square rotated by 3 degrees: its top and bottom sides run almost along image rows
+    square, corners = rotated_square((0.0, 0.0), 0.05, 3.0, 0.5)
+    frame = render_pair([square], seed=2)
+    result = extract_frame(frame, ExtractParams())
+    assert result.counts["critical"] >= 4
+    near_horizontal = np.abs(result.segments.directions[:, 1]) < 0.3
+    assert not near_horizontal.any()
+    # the vertical sides are still triangulated
+    assert (np.abs(result.segments.directions[:, 1]) > 0.95).sum() >= 4
+
+
+def test_slanted_edge_direction_from_global_support():
+    # a plane tilted 40 degrees about the vertical axis: a horizontal-ish 3D edge recedes in depth
+    c, s = np.cos(np.radians(40)), np.sin(np.radians(40))
+    corners = np.array([[-0.05 * c, -0.05, 0.5 - 0.05 * s], [0.05 * c, -0.03, 0.5 + 0.05 * s],
+                        [0.05 * c, 0.05, 0.5 + 0.05 * s], [-0.05 * c, 0.05, 0.5 - 0.05 * s]])
+    frame = render_pair([quad(corners)], seed=4)
+    seg = extract_frame(frame, ExtractParams()).segments
+    top = corners[1] - corners[0]
+    top /= np.linalg.norm(top)
+    on_top = np.abs(np.cross(seg.centers - corners[0], top)).max(axis=1) < 0.003
+    assert on_top.sum() >= 4
+    angle = np.degrees(np.arccos(np.clip(np.abs(seg.directions[on_top] @ top), 0, 1)))
+    print(f"receding edge: {on_top.sum()} segments, direction error median {np.median(angle):.2f} deg")
+    assert np.median(angle) < 3.0
