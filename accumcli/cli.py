@@ -15,6 +15,7 @@ import logging
 import sys
 
 import click
+import numpy as np
 
 from . import __version__
 from .errors import AccumError
@@ -389,6 +390,10 @@ def _model_outputs(ctx, param, value):
               help="A truth sidecar: also measure precision, completeness and background frame by frame.")
 @click.option("--history", type=click.Path(dir_okay=False), callback=_output_path,
               help="Write the per-frame counts (and figures with --truth) as JSON lines.")
+@click.option("--png", type=click.Path(dir_okay=False), callback=_output_path,
+              help="Write a picture of the model (confidence as grey level, dark = high).")
+@click.option("--panel", type=click.Path(dir_okay=False), callback=_output_path,
+              help="Write the last frame's input image, extraction and the model side by side.")
 @click.option("--position-threshold", type=click.FloatRange(0.1, 50.0), default=3.0, show_default=True,
               help="s_p of the metric, millimetres.")
 @click.option("--angle-threshold", type=click.FloatRange(0.5, 45.0), default=7.0, show_default=True,
@@ -397,8 +402,8 @@ def _model_outputs(ctx, param, value):
 @extraction_options
 @recording_options
 @click.pass_context
-def accumulate(ctx, recording, outputs, rrd, truth, history, position_threshold, angle_threshold, frame_range,
-               extract_params, recording_kwargs):
+def accumulate(ctx, recording, outputs, rrd, truth, history, png, panel, position_threshold, angle_threshold,
+               frame_range, extract_params, recording_kwargs):
     """Accumulate a model of the object over the recording, with the gripper's known motion.
 
     \b
@@ -444,6 +449,13 @@ def accumulate(ctx, recording, outputs, rrd, truth, history, position_threshold,
         model = acc.model()
     for path in outputs:
         (write_ply if path.lower().endswith(".ply") else write_model)(path, model)
+    if png or panel:
+        from .render import render_frame_panel, render_model, write_png
+
+        if png:
+            write_png(png, render_model(model))
+        if panel and rows:
+            write_png(panel, render_frame_panel(step.frame, step.extraction, model, step.T_camera_object))
     if history:
         with atomic_open(history) as f:
             f.writelines(json.dumps(r) + "\n" for r in rows)
@@ -456,7 +468,122 @@ def accumulate(ctx, recording, outputs, rrd, truth, history, position_threshold,
         last = rows[-1]
         click.echo(f"against {truth}: precision {last['precision']:.3f}, completeness {last['completeness']:.3f}, "
                    f"background {last['background']:.3f}")
-    click.echo("wrote " + ", ".join([*outputs, *([rrd] if rrd else []), *([history] if history else [])]))
+    click.echo("wrote " + ", ".join([*outputs, *(p for p in (rrd, history, png, panel) if p)]))
+
+
+# -- view ------------------------------------------------------------------------------------------
+@main.command()
+@click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False, exists=True))
+@click.option("--rrd", type=click.Path(dir_okay=False), callback=_output_path, help="Save a Rerun recording.")
+@click.option("--spawn", is_flag=True, help="Open the Rerun viewer (where one can run).")
+@click.option("--connect", metavar="URL", help="Send to a running viewer, e.g. rerun+http://127.0.0.1:9876/proxy.")
+@click.option("--png", type=click.Path(dir_okay=False), callback=_output_path,
+              help="Write a picture: the model (with a recording: one frame, its extraction and the model).")
+@click.option("--png-frame", type=click.IntRange(min=0), help="Frame of the recording for --png (default: middle).")
+@frames_option
+@recording_options
+@click.pass_context
+def view(ctx, inputs, rrd, spawn, connect, png, png_frame, frame_range, recording_kwargs):
+    """Show recordings, models, frames files and poses files in Rerun, or as a picture.
+
+    INPUTS is any mix of a recording (.mcap), models (.json), frames files
+    (.jsonl, from extract), poses files (.json, from track) and truth sidecars.
+    With a recording, world is the left camera frame and each model is placed
+    at the object's pose in every frame (the poses file's if given, else the
+    recording's).
+
+    \b
+    Examples:
+      accum view sample_data/sim_box.mcap out/demo/model.json --rrd out/view.rrd
+      accum view out/demo/model.json --png out/model.png
+    """
+    from pathlib import Path
+
+    from .model_io import file_kind, read_frames, read_model, read_poses, read_truth
+    from .recording import Recording
+    from .segments import Segments
+
+    if sum(map(bool, (rrd, spawn, connect))) > 1:
+        raise click.UsageError("choose one of --rrd, --spawn and --connect")
+    if not (rrd or spawn or connect or png):
+        raise click.UsageError("nothing to do: give --rrd, --spawn, --connect or --png")
+    kinds = {path: file_kind(path) for path in inputs}
+    recordings = [p for p, k in kinds.items() if k == "recording"]
+    models = {Path(p).stem.replace(".", "_"): read_model(p) for p, k in kinds.items() if k == "model"}
+    for p, k in kinds.items():
+        if k == "truth":
+            truth = read_truth(p)
+            direction = truth.b - truth.a
+            length = np.linalg.norm(direction, axis=1)
+            models["truth"] = Segments(truth.object_frame, (truth.a + truth.b) / 2, direction / length[:, None],
+                                       length, np.ones(len(length)), np.ones(len(length), np.int64))
+    tracks = [read_poses(p) for p, k in kinds.items() if k == "poses"]
+    frames_files = [p for p, k in kinds.items() if k == "frames"]
+    if len(recordings) > 1:
+        raise click.UsageError("give at most one recording")
+
+    def pose_at(t_ns, recorded):
+        for track in tracks:
+            i = int(np.argmin(np.abs(track.times_ns - t_ns))) if len(track.times_ns) else -1
+            if i >= 0 and abs(int(track.times_ns[i]) - t_ns) <= recording_kwargs["tolerance_ns"] \
+                    and np.isfinite(track.poses[i]).all():
+                return track.poses[i]
+        return recorded
+
+    if rrd or spawn or connect:
+        from .visualize import RerunLog
+
+        viz = RerunLog("accum view", rrd=rrd, kind="view", spawn=spawn, connect=connect)
+        positions = []
+        if recordings:
+            with Recording(recordings[0], require_pose=False, **recording_kwargs) as rec, \
+                    progress_bar(ctx, _frames_to_do(rec, frame_range), "logging") as bar:
+                for frame in rec.frames(*frame_range):
+                    T = pose_at(frame.timestamp_ns, frame.T_camera_object)
+                    viz.recording_frame(frame, models, T)
+                    if T is not None:
+                        positions.append(T[:3, 3])
+                    bar(1)
+        else:
+            for name, model in models.items():
+                viz.model(model, np.eye(4), f"world/{name}")
+        for track in tracks:
+            ok = np.isfinite(track.poses).all(axis=(1, 2))
+            positions.extend(track.poses[ok, :3, 3])
+        if positions and (recordings or tracks):
+            viz.trajectory(np.array(positions))
+        for path in frames_files:
+            for index, (t_ns, segments, doc) in enumerate(read_frames(path)):
+                viz.frame_segments(doc.get("frame_index", index), t_ns, segments)
+        viz.close()
+        if rrd:
+            click.echo(f"wrote {rrd}")
+    if png:
+        _write_picture(png, png_frame, recordings, models, pose_at, recording_kwargs)
+        click.echo(f"wrote {png}")
+
+
+def _write_picture(png, png_frame, recordings, models, pose_at, recording_kwargs) -> None:
+    """The model alone, or (with a recording) one frame, its extraction and the model, as in the paper."""
+    from .extract import extract_frame
+    from .recording import Recording
+    from .render import render_frame_panel, render_model, write_png
+
+    named = [m for name, m in models.items() if name != "truth"] or list(models.values())
+    if not named:
+        raise click.UsageError("--png needs a model")
+    if not recordings:
+        write_png(png, render_model(named[0]))
+        return
+    with Recording(recordings[0], require_pose=False, **recording_kwargs) as rec:
+        wanted = png_frame if png_frame is not None else rec.frame_count_hint // 2
+        for frame in rec.frames(wanted, wanted + 1):
+            T = pose_at(frame.timestamp_ns, frame.T_camera_object)
+            if T is None:
+                raise AccumError(f"{recordings[0]}: frame {wanted} has no pose to place the model")
+            write_png(png, render_frame_panel(frame, extract_frame(frame), named[0], T))
+            return
+    raise AccumError(f"{recordings[0]}: no frame {wanted}")
 
 
 # -- eval ------------------------------------------------------------------------------------------

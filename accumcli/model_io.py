@@ -269,3 +269,21 @@ def read_truth(path) -> Truth:
                  [e.get("kind", "") for e in edges], seen,
                  np.array([bool(e.get("completeness", True)) for e in edges]), times, poses,
                  {k: v for k, v in doc.items() if k not in ("edges", "poses")})
+
+
+def file_kind(path) -> str:
+    """'recording', 'frames', 'model', 'poses' or 'truth', from the file's magic bytes or format tag."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(4096)
+    except (FileNotFoundError, IsADirectoryError):
+        raise FileFormatError(f"{path}: no such file") from None
+    if head.startswith(b"\x89MCAP"):
+        return "recording"
+    text = head.decode("utf-8", "replace")
+    for tag, kind in ((MODEL_FORMAT, "model"), (POSES_FORMAT, "poses"), (TRUTH_FORMAT, "truth")):
+        if tag in text:
+            if kind == "model" and str(path).endswith(".jsonl"):
+                return "frames"
+            return kind
+    raise FileFormatError(f"{path}: not a recording, model, frames, poses or truth file of accum")

@@ -115,16 +115,16 @@ class RerunLog:
         ends = transform_points(T_world_frame, segments.endpoints().reshape(-1, 3)).reshape(-1, 2, 3)
         self.rec.log(path, rr.LineStrips3D(_strips(ends), colors=FRAME_SEGMENTS, radii=rr.Radius.ui_points(1.0)))
 
-    def model(self, model, T_world_object: np.ndarray = np.eye(4)) -> None:
+    def model(self, model, T_world_object: np.ndarray = np.eye(4), path: str = "world/model") -> None:
         """The model (object frame) in world: accepted segments blue, tentative ones light grey,
-        each darker the more confident."""
+        each darker the more confident; under ``path``/accepted and ``path``/tentative."""
         c = model.confidence[:, None]
         blue = np.column_stack([60 * (1 - c), 60 + 100 * (1 - c), 140 + 115 * (1 - c)])
         grey = np.repeat(230 - 120 * c, 3, axis=1)
         colors = np.where(model.accepted[:, None], blue, grey).astype(np.uint8)
         ends = transform_points(T_world_object, model.endpoints().reshape(-1, 3)).reshape(-1, 2, 3)
         for name, keep, width in (("accepted", model.accepted, 2.0), ("tentative", ~model.accepted, 1.0)):
-            self.rec.log(f"world/model/{name}", rr.LineStrips3D(_strips(ends[keep]), colors=colors[keep],
+            self.rec.log(f"{path}/{name}", rr.LineStrips3D(_strips(ends[keep]), colors=colors[keep],
                                                                 radii=rr.Radius.ui_points(width)))
 
     def scalars(self, values: dict) -> None:
@@ -157,6 +157,24 @@ class RerunLog:
         self.segments_3d("world/frame_segments", step.extraction.segments, T_object_camera)
         self.model(model)
         self.scalars({k: row[k] for k in ACCUMULATE_STATS if k in row})
+
+    def recording_frame(self, frame, models: dict, T_camera_object: np.ndarray | None) -> None:
+        """One frame of ``accum view`` on a recording: world = left camera frame; each model
+        (name -> Segments) placed at the frame's object pose, if it has one."""
+        self.set_frame(frame.index, frame.timestamp_ns)
+        self.camera(frame.intrinsics, np.eye(4))
+        self.images(frame)
+        if T_camera_object is not None:
+            for name, model in models.items():
+                self.model(model, T_camera_object, f"world/{name}")
+            self.rec.log("world/object", rr.Transform3D(translation=T_camera_object[:3, 3],
+                                                        mat3x3=T_camera_object[:3, :3]),
+                         rr.TransformAxes3D(0.05))
+
+    def frame_segments(self, index: int, timestamp_ns: int, segments) -> None:
+        """One line of a frames file: its 3D segments in world = the left camera frame."""
+        self.set_frame(index, timestamp_ns)
+        self.segments_3d("world/frame_segments", segments, np.eye(4))
 
     def close(self) -> None:
         """Flush everything to the sink and detach from it (an .rrd is complete afterwards)."""
