@@ -21,8 +21,8 @@ by the known motion (the entity type's ``transform``):
    that could not have been observed keep their confidence: an edge that
    turned out of view, or behind the object, is not punished.
 4. Unmatched observations join the model with confidence ``initial``.
-5. Model entities that duplicate each other (the entity type's ``duplicates``)
-   are merged: they would otherwise compete for the same observations.
+5. Model entities that duplicate each other (the entity type's ``same``) are
+   merged: they would otherwise compete for the same observations.
 6. Entities below ``floor`` are pruned, and so are tentative ones
    (confidence < 0.5) not confirmed for ``tentative_frames`` frames, which
    bounds the model's size on long recordings.
@@ -69,9 +69,9 @@ class EntityType(Protocol[E]):
     def expected(self, model: E, context: Any) -> np.ndarray:
         """(N,) bool: the frame described by ``context`` should have observed these entities."""
 
-    def duplicates(self, model: E) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(i, j, cost) of model entities that describe the same thing (stricter than
-        ``correspondences``, which must tolerate an observation's noise)."""
+    def same(self, model: E, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(mask, cost) for pairs of model entities: which describe the same thing (a test
+        stricter than ``correspondences``, which must tolerate an observation's noise)."""
 
 
 def logit(p: float) -> float:
@@ -119,19 +119,34 @@ def one_to_one(a: np.ndarray, b: np.ndarray, cost: np.ndarray, rounds: int = 4) 
     """
     chosen = []
     alive = np.arange(len(a))
+    used_a = np.zeros(int(a.max(initial=-1)) + 1, bool)
+    used_b = np.zeros(int(b.max(initial=-1)) + 1, bool)
     for _ in range(rounds):
         if len(alive) == 0:
             break
         aa, bb, cc = a[alive], b[alive], cost[alive]
-        best_a = _cheapest(aa, cc)
-        best_b = _cheapest(bb, cc)
         mutual = np.zeros(len(alive), bool)
-        mutual[np.intersect1d(best_a, best_b)] = True
+        mutual[_cheapest(aa, cc)] = True
+        best_b = np.zeros(len(alive), bool)
+        best_b[_cheapest(bb, cc)] = True
+        mutual &= best_b
         chosen.append(alive[mutual])
-        used_a = np.isin(aa, aa[mutual])
-        used_b = np.isin(bb, bb[mutual])
-        alive = alive[~(used_a | used_b)]
+        used_a[aa[mutual]] = True
+        used_b[bb[mutual]] = True
+        alive = alive[~(used_a[aa] | used_b[bb])]
     return np.concatenate(chosen) if chosen else np.zeros(0, np.int64)
+
+
+def _sharing(model_index: np.ndarray, observed_index: np.ndarray, reach: int = 4):
+    """Pairs (i, j), i != j, of model entities that correspond to the same observation."""
+    order = np.argsort(observed_index, kind="stable")
+    m, o = model_index[order], observed_index[order]
+    pairs = [(m[:-d][o[d:] == o[:-d]], m[d:][o[d:] == o[:-d]]) for d in range(1, reach) if len(m) > d]
+    if not pairs:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    i, j = (np.concatenate(x) for x in zip(*pairs))
+    distinct = i != j
+    return i[distinct], j[distinct]
 
 
 def _cheapest(keys: np.ndarray, cost: np.ndarray) -> np.ndarray:
@@ -173,6 +188,7 @@ class Accumulator(Generic[E]):
         confirmed = np.zeros(n_model, bool)
         confirmed[all_mi] = True
         missed = expected & ~confirmed
+        candidates = _sharing(all_mi, all_oi)
         if len(mi):
             self.entities = T.merge(self.entities, observed, mi, oi, context)
         self.log_odds = np.minimum(self.log_odds + rule.hit * confirmed + rule.miss * missed, logit(rule.ceiling))
@@ -187,13 +203,13 @@ class Accumulator(Generic[E]):
             self.log_odds = np.concatenate([self.log_odds, np.full(n_new, logit(rule.initial))])
             self.observations = np.concatenate([self.observations, np.ones(n_new, np.int64)])
             self.last_confirmed = np.concatenate([self.last_confirmed, np.full(n_new, self.frame)])
-        n_merged = self._consolidate()
+        n_merged = self._consolidate(*candidates)
         # pruning
         confidence = self.confidence
         stale = (confidence < 0.5) & (self.frame - self.last_confirmed >= rule.tentative_frames)
         alive = (confidence >= rule.floor) & ~stale
-        n_pruned = int((~alive).sum())
-        if n_pruned:
+        n_pruned = int((~alive).sum()) - n_merged
+        if n_pruned or n_merged:
             index = np.flatnonzero(alive)
             self.entities = T.select(self.entities, index)
             self.log_odds, self.observations = self.log_odds[index], self.observations[index]
@@ -202,15 +218,18 @@ class Accumulator(Generic[E]):
         return StepStats(observed=n_obs, confirmed=int(confirmed.sum()), missed=int(missed.sum()), new=n_new, pruned=n_pruned,
                          merged=n_merged, size=len(self), accepted=int((self.confidence >= 0.5).sum()))
 
-    def _consolidate(self) -> int:
-        """Merge model entities that correspond to each other (one-to-one, by the entity
-        metric): the more confident one absorbs the other, keeping the larger
-        confidence and the sum of observations. Without this, a duplicate would
-        take the observations of the entity it doubles (correspondences are
-        one-to-one) and both would be punished in turn."""
-        i, j, cost = self.type.duplicates(self.entities)
-        distinct = i != j
-        i, j, cost = i[distinct], j[distinct], cost[distinct]
+    def _consolidate(self, i: np.ndarray, j: np.ndarray) -> int:
+        """Merge model entities (candidate pairs i, j) that the entity type deems the same:
+        the more confident one absorbs the other, keeping the larger confidence
+        and the sum of observations. Without this, a duplicate would take the
+        observations of the entity it doubles (merging is one-to-one) and both
+        would be punished in turn. Candidates are the entities that corresponded
+        to one observation: only those can have become duplicates (a new entity
+        corresponded to nothing)."""
+        if len(i) == 0:
+            return 0
+        same, cost = self.type.same(self.entities, i, j)
+        i, j, cost = i[same], j[same], cost[same]
         if len(i) == 0:
             return 0
         keep = one_to_one(i, j, cost)
@@ -225,10 +244,5 @@ class Accumulator(Generic[E]):
         self.log_odds[winner] = np.maximum(self.log_odds[winner], self.log_odds[loser])
         self.observations[winner] += self.observations[loser]
         self.last_confirmed[winner] = np.maximum(self.last_confirmed[winner], self.last_confirmed[loser])
-        alive = np.ones(len(self), bool)
-        alive[loser] = False
-        index = np.flatnonzero(alive)
-        self.entities = self.type.select(self.entities, index)
-        self.log_odds, self.observations = self.log_odds[index], self.observations[index]
-        self.last_confirmed = self.last_confirmed[index]
+        self.log_odds[loser] = -np.inf  # removed with the pruned ones, in one copy
         return len(loser)

@@ -25,7 +25,8 @@ Entities are ``Segments`` in the object frame with running sums in ``extra``:
   confirm the neighbours and are never added);
 - ``views`` (N, K, 3): up to K unit directions (object frame, segment to
   camera) from which the segment was confirmed, at least ``view_step_deg``
-  apart (NaN where unused): the set of aspects in which it has been seen.
+  apart (zero vectors where unused): the set of aspects in which it has been
+  seen.
 
 Running sums are scaled down once their weight passes ``max_weight``, so a
 long-lived segment still follows new evidence.
@@ -46,7 +47,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .geometry import invert, rotate_vectors, transform_points
-from .metric import MetricThresholds, candidate_pairs
+from .metric import MetricThresholds, candidate_pairs, d_o, d_p
 from .recording import StereoIntrinsics
 from .segments import Segments, concatenate
 
@@ -61,7 +62,7 @@ class LineModelParams:
     critical_angle_deg: float = 12.0
     image_margin_px: float = 5.0
     duplicate_shift: float = 0.25     # fraction of a length; closer centres along the line are duplicates
-    max_views: int = 8                # viewing directions kept per segment
+    max_views: int = 6                # viewing directions kept per segment
     view_step_deg: float = 10.0       # a new viewing direction is kept if this far from the stored ones
     max_extent: float = 1.6           # a model segment covers at most this many observation lengths
     reference_direction_sigma_deg: float = 2.0  # a direction this certain weighs as much as its confidence
@@ -85,7 +86,7 @@ class LineSegmentType:
         s = Segments.empty(frame_id)
         s.extra = {"info": np.zeros((0, 3, 3)), "info_vec": np.zeros((0, 3)), "anchor": np.zeros(0),
                    "dir_sum": np.zeros((0, 3)), "weight": np.zeros(0),
-                   "views": np.zeros((0, self.params.max_views, 3))}
+                   "views": np.zeros((0, self.params.max_views, 3), np.float32)}
         return s
 
     def size(self, entities: Segments) -> int:
@@ -104,14 +105,18 @@ class LineSegmentType:
         return candidate_pairs(model.centers, model.directions, model.lengths, observed.centers,
                                observed.directions, observed.lengths, self.params.thresholds)
 
-    def duplicates(self, model: Segments):
+    def same(self, model: Segments, i: np.ndarray, j: np.ndarray):
         """Pairs of model segments within the metric's thresholds whose centres are also within
         ``duplicate_shift`` of a length along their line: the same piece twice, not two
         neighbouring pieces (which the paper's metric, made for noisy observations, would pair)."""
-        i, j, cost = self.correspondences(model, model)
+        th = self.params.thresholds
+        angle = d_o(model.directions[i], model.directions[j])
+        position = d_p(model.centers[i], model.directions[i], model.lengths[i], model.centers[j],
+                       model.directions[j], model.lengths[j], th.s_p)
         along = np.abs(np.sum((model.centers[j] - model.centers[i]) * model.directions[i], axis=1))
-        same = (i != j) & (along <= self.params.duplicate_shift * np.minimum(model.lengths[i], model.lengths[j]))
-        return i[same], j[same], cost[same]
+        same = (angle <= np.radians(th.s_o_deg)) & (position <= th.s_p) & (
+            along <= self.params.duplicate_shift * np.minimum(model.lengths[i], model.lengths[j]))
+        return same, (position / th.s_p) ** 2 + (angle / np.radians(th.s_o_deg)) ** 2
 
     def observe(self, observed: Segments, context: FrameContext) -> Segments:
         """Initialise the running sums of observations (already in the object frame)."""
@@ -124,12 +129,15 @@ class LineSegmentType:
         sigma_lat = depth * p.lateral_sigma_px / context.intrinsics.fx
         sigma_depth = observed.extra.get("sigma_depth_m", sigma_lat * 10)
         u = observed.directions
-        cov = (sigma_lat[:, None, None] ** 2 * np.eye(3)
-               + (np.maximum(sigma_depth, sigma_lat) ** 2 - sigma_lat ** 2)[:, None, None] * ray[:, :, None] *
-               ray[:, None, :])
+        # covariance a I + b r r^T; its inverse by Sherman-Morrison: (I - b / (a + b) r r^T) / a
+        a = sigma_lat ** 2
+        b = np.maximum(sigma_depth, sigma_lat) ** 2 - a
         w = np.clip(observed.confidence, 0.05, 1.0)
+        # restricted to the plane across u: P = I - u u^T, P cov^-1 P = (P - b / (a + b) (P r)(P r)^T) / a
         across = np.eye(3) - u[:, :, None] * u[:, None, :]
-        info = across @ np.linalg.inv(cov) @ across * w[:, None, None]
+        ray_across = ray - np.sum(ray * u, axis=1, keepdims=True) * u
+        info = (across - (b / (a + b))[:, None, None] * ray_across[:, :, None] * ray_across[:, None, :]) * \
+            (w / a)[:, None, None]
         anchor = w / (observed.lengths ** 2 / 12)
         info = info + anchor[:, None, None] * u[:, :, None] * u[:, None, :]
         out = Segments(observed.frame_id, observed.centers, u, observed.lengths, observed.confidence,
@@ -143,9 +151,10 @@ class LineSegmentType:
 
     def merge(self, model: Segments, observed: Segments, mi: np.ndarray, oi: np.ndarray,
               context: FrameContext) -> Segments:
-        """Information-weighted merge of the matched pairs (model index ``mi``, observed ``oi``)."""
+        """Information-weighted merge of the matched pairs (model index ``mi``, observed ``oi``),
+        in place (the model's arrays are updated and returned)."""
         x, o = model.extra, observed.extra
-        extra = {k: v.copy() for k, v in x.items()}
+        extra = x  # updated in place: copying the whole model's state every frame would cost more than the merge
         scale = np.minimum(1.0, self.params.max_weight / np.maximum(x["weight"][mi], 1e-9))
         for key in ("info", "info_vec", "dir_sum", "weight"):
             shape = (-1,) + (1,) * (x[key].ndim - 1)
@@ -161,11 +170,14 @@ class LineSegmentType:
         extra["weight"][mi] += o["weight"][oi]
         views = x["views"][mi]
         for k in range(o["views"].shape[1]):
-            views = _add_view(views, o["views"][oi, k], np.radians(self.params.view_step_deg))
+            new = o["views"][oi, k]
+            if not new.any():
+                break  # an observation has one view; a merged model segment a few
+            views = _add_view(views, new, np.radians(self.params.view_step_deg))
         extra["views"][mi] = views
-        centers = model.centers.copy()
+        centers = model.centers
         solved = np.linalg.solve(extra["info"][mi], extra["info_vec"][mi][:, :, None])[:, :, 0]
-        directions = model.directions.copy()
+        directions = model.directions
         directions[mi] = u = _unit(extra["dir_sum"][mi])
         # extent along the line: the union of the model's and the observation's, at most max_extent lengths
         rel = observed.centers[oi] - model.centers[mi]
@@ -178,7 +190,7 @@ class LineSegmentType:
         along = np.sum((solved - model.centers[mi]) * u, axis=1)
         centers[mi] = solved + ((lo + hi) / 2 - along)[:, None] * u
         extra["info_vec"][mi] = np.einsum("nij,nj->ni", extra["info"][mi], centers[mi])
-        lengths = model.lengths.copy()
+        lengths = model.lengths
         lengths[mi] = hi - lo
         return Segments(model.frame_id, centers, directions, lengths, model.confidence, model.observations, extra)
 
@@ -197,28 +209,29 @@ class LineSegmentType:
         d2 = (uv_left[1::2] - uv_left[0::2])
         angle = np.degrees(np.arctan2(np.abs(d2[:, 1]), np.abs(d2[:, 0])))
         not_critical = angle >= p.critical_angle_deg + 3.0
-        camera_in_object = invert(T)[:3, 3]
-        view = _unit(camera_in_object - model.centers)
-        cosines = np.einsum("nkj,nj->nk", model.extra["views"], view)
-        in_aspect = np.nanmax(np.where(np.isnan(cosines), -1.0, cosines), axis=1) >= np.cos(
-            np.radians(p.aspect_margin_deg))
+        to_camera = (invert(T)[:3, 3] - model.centers).astype(np.float32)
+        # cos(view, stored) >= cos(margin), without normalising: unused (zero) slots give 0
+        projections = np.einsum("nkj,nj->nk", model.extra["views"], to_camera).max(axis=1)
+        in_aspect = projections >= np.cos(np.radians(p.aspect_margin_deg)) * np.linalg.norm(to_camera, axis=1)
         return inside & not_critical & in_aspect
 
 
 def _new_views(ray: np.ndarray, max_views: int) -> np.ndarray:
-    views = np.full((len(ray), max_views, 3), np.nan)
+    """(N, max_views, 3) float32 view sets holding ``ray``; float32 is ample for directions compared at
+    degrees, and halves the largest part of a model segment's state."""
+    views = np.zeros((len(ray), max_views, 3), np.float32)
     views[:, 0] = ray
     return views
 
 
 def _add_view(views: np.ndarray, new: np.ndarray, step: float) -> np.ndarray:
-    """Add unit directions ``new`` (M, 3) to view sets (M, K, 3) where they are farther than
-    ``step`` from every stored one: into a free slot, or else in place of the nearest."""
+    """Add unit directions ``new`` (M, 3; zero rows: nothing) to view sets (M, K, 3) where they are
+    farther than ``step`` from every stored one: into a free slot, or else in place of the nearest."""
     views = views.copy()
-    cosines = np.einsum("mkj,mj->mk", views, new)
-    valid = ~np.isnan(cosines)
-    nearest = np.argmax(np.where(valid, cosines, -2.0), axis=1)
-    novel = ~np.isnan(new[:, 0]) & (np.max(np.where(valid, cosines, -2.0), axis=1) < np.cos(step))
+    valid = views.any(axis=2)
+    cosines = np.where(valid, np.einsum("mkj,mj->mk", views, new), -2.0)
+    nearest = np.argmax(cosines, axis=1)
+    novel = new.any(axis=1) & (cosines.max(axis=1) < np.cos(step))
     free = ~valid.all(axis=1)
     slot = np.where(free, np.argmax(~valid, axis=1), nearest)
     rows = np.flatnonzero(novel)
@@ -241,10 +254,9 @@ def to_model(entities: Segments, confidence: np.ndarray, observations: np.ndarra
     extra = entities.extra
     covariance = np.linalg.inv(extra["info"]) if len(entities) else np.zeros((0, 3, 3))
     views = extra["views"]
-    mean_view = _unit(np.nansum(views, axis=1))
-    cosines = np.einsum("nkj,nj->nk", views, mean_view)
-    spread = np.degrees(np.arccos(np.clip(np.nanmin(np.where(np.isnan(cosines), 1.0, cosines), axis=1), -1, 1))) \
-        if len(entities) else np.zeros(0)
+    mean_view = _unit(views.sum(axis=1))
+    cosines = np.where(views.any(axis=2), np.einsum("nkj,nj->nk", views, mean_view), 1.0)
+    spread = np.degrees(np.arccos(np.clip(cosines.min(axis=1, initial=1.0), -1, 1)))
     u = entities.directions
     across = np.trace(covariance, axis1=1, axis2=2) - np.einsum("ni,nij,nj->n", u, covariance, u)
     return Segments(entities.frame_id, entities.centers, entities.directions, entities.lengths,

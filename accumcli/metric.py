@@ -51,13 +51,15 @@ def d_p(p, u, length, p_other, u_other, length_other, s_p: float) -> np.ndarray:
 
 
 def candidate_pairs(centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b,
-                    thresholds: MetricThresholds, tree_a: cKDTree | None = None):
-    """All pairs (i in a, j in b) with d_o <= s_o and d_p <= s_p.
+                    thresholds: MetricThresholds, neighbours: int = 6):
+    """The pairs (i in a, j in b) with d_o <= s_o and d_p <= s_p.
 
-    A KD-tree on the centres finds the pairs whose centres are near enough to
-    possibly pass (``d_p <= s_p`` bounds the distance by
-    ``hypot(s_p + max length / 2, s_p)``); the exact metric is then evaluated
-    on those only. Returns (i (K,), j (K,), cost (K,)) with
+    A KD-tree on a's centres gives each segment of b its ``neighbours`` nearest
+    centres within the distance that ``d_p <= s_p`` allows
+    (``hypot(s_p + max length / 2, s_p)``); the exact metric is then evaluated
+    on those only. A correspondence beyond the 6th nearest centre is not
+    looked for: local segments are a centimetre apart along an edge, so it is
+    practically never the right one. Returns (i (K,), j (K,), cost (K,)) with
     ``cost = (d_p / s_p)^2 + (d_o / s_o)^2`` in [0, 2].
     """
     empty = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
@@ -66,13 +68,18 @@ def candidate_pairs(centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b,
     s_p = thresholds.s_p
     longest = max(float(lengths_a.max()), float(lengths_b.max()))
     radius = float(np.hypot(s_p + longest / 2, s_p))
-    tree_a = tree_a if tree_a is not None else cKDTree(centers_a)
-    pairs = cKDTree(centers_b).sparse_distance_matrix(tree_a, radius, output_type="ndarray")
-    j, i = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
+    k = min(neighbours, len(centers_a))
+    distance, index = cKDTree(centers_a, balanced_tree=False, compact_nodes=False).query(
+        centers_b, k=k, distance_upper_bound=radius)
+    found = np.isfinite(np.asarray(distance).reshape(len(centers_b), k))
+    j = np.nonzero(found)[0].astype(np.int64)
+    i = np.asarray(index).reshape(len(centers_b), k)[found].astype(np.int64)
     if len(i) == 0:
         return empty
-    angle = d_o(dirs_a[i], dirs_b[j])
-    dist = d_p(centers_a[i], dirs_a[i], lengths_a[i], centers_b[j], dirs_b[j], lengths_b[j], s_p)
     s_o = np.radians(thresholds.s_o_deg)
-    ok = (angle <= s_o) & (dist <= s_p)
+    angle = d_o(dirs_a[i], dirs_b[j])
+    keep = angle <= s_o  # the cheap test first
+    i, j, angle = i[keep], j[keep], angle[keep]
+    dist = d_p(centers_a[i], dirs_a[i], lengths_a[i], centers_b[j], dirs_b[j], lengths_b[j], s_p)
+    ok = dist <= s_p
     return i[ok], j[ok], (dist[ok] / s_p) ** 2 + (angle[ok] / s_o) ** 2

@@ -7,9 +7,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+import bench_accumulate  # noqa: E402
+import bench_extract  # noqa: E402
 import bench_reader  # noqa: E402
 
-SUITES = {"reader": bench_reader.main}
+SUITES = {"reader": bench_reader.main, "extract": bench_extract.main, "accumulate": bench_accumulate.main}
 
 if __name__ == "__main__":
     chosen = sys.argv[1:] or list(SUITES)

@@ -9,7 +9,7 @@ from accumcli.cli import main
 
 from .test_recording import broken_files
 
-COMMANDS_ON_RECORDINGS = [["info"]]
+COMMANDS_ON_RECORDINGS = [["info"], ["extract"], ["accumulate"]]
 
 
 def run(*args):
@@ -27,7 +27,8 @@ def test_version_and_help():
                                   "missing file"])
 def test_bad_recordings_end_in_one_line(tmp_path, command, case):
     path, message = broken_files(tmp_path)[case]
-    result = run(*command, path, *(["-o", tmp_path / "out.json"] if command[0] != "info" else []))
+    out = {"extract": ["-o", tmp_path / "out.jsonl"], "accumulate": ["-o", tmp_path / "out.json"]}
+    result = run(*command, path, *out.get(command[0], []))
     assert result.exit_code == 1, result.output
     lines = result.output.strip().splitlines()
     assert lines[-1].startswith("error: ") and message in lines[-1] and str(path) in lines[-1]
@@ -53,3 +54,71 @@ def test_simulate_rejects_bad_options(tmp_path):
     assert result.exit_code == 2 and "expected DEG,MM" in result.output
     result = run("simulate", "-o", tmp_path / "missing" / "x.mcap", "--frames", "1", "--size", "64x48")
     assert result.exit_code == 1 and "does not exist" in result.output
+
+
+@pytest.mark.parametrize("command", [["extract", "-o", "frames.jsonl"], ["accumulate", "-o", "model.json"]])
+def test_missing_transform_tree_is_a_whole_file_error(tmp_path, command):
+    path, _ = broken_files(tmp_path)["no tf"]
+    result = run(command[0], path, command[1], tmp_path / command[2])
+    assert result.exit_code == 1 and "missing topic /tf" in result.output.strip().splitlines()[-1]
+
+
+def test_extract_writes_one_line_per_frame(small_recording, tmp_path):
+    import json
+
+    out = tmp_path / "frames.jsonl"
+    result = run("extract", small_recording, "-o", out, "--frames", "1:4")
+    assert result.exit_code == 0, result.output
+    lines = [json.loads(line) for line in out.read_text().splitlines()]
+    assert [d["frame_index"] for d in lines] == [1, 2, 3]
+    assert all(d["format"] == "accum.model/1" and d["frame_id"] == "camera_left" for d in lines)
+    assert all("timestamp_ns" in d and len(d["segments"]) > 20 for d in lines)
+    assert "3D segments per frame" in result.output and "critical" in result.output
+    figures = run("eval", "--frames", out, small_recording.replace(".mcap", ".truth.json"), "--json")
+    assert json.loads(figures.output)["accuracy_near_object"] > 0.8
+
+
+def test_accumulate_then_eval(small_recording, tmp_path):
+    import json
+
+    truth = small_recording.replace(".mcap", ".truth.json")
+    model, ply, history = tmp_path / "m.json", tmp_path / "m.ply", tmp_path / "h.jsonl"
+    result = run("accumulate", small_recording, "-o", model, "-o", ply, "--truth", truth, "--history", history)
+    assert result.exit_code == 0, result.output
+    assert model.exists() and ply.exists() and len(history.read_text().splitlines()) == 6
+    figures = json.loads(run("eval", model, truth, "--json").output)
+    assert figures["accepted"] > 20 and figures["precision"] > 0.85 and figures["background"] < 0.05
+
+
+def test_frames_without_pose_are_skipped_with_a_warning(tmp_path):
+    from . import helpers
+
+    times = [helpers.T0 + i * helpers.PERIOD for i in range(3)]
+    path = helpers.write(tmp_path / "short_tf.mcap", n=5, tf_times=times)
+    result = run("accumulate", path, "-o", tmp_path / "m.json")
+    assert result.exit_code == 0, result.output
+    assert result.output.count("warning:") == 2 and "frame 3: no pose" in result.output
+    assert "2 skipped without a pose" in result.output
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--angle-threshold", "90"], "not in the range"),
+    (["--detector", "canny"], "'canny' is not one of"),
+    (["--depth-range", "2:1"], "expected MIN:MAX"),
+    (["-o", "nowhere/m.json"], "does not exist"),
+    (["-o", "m.txt"], "expected a .json or .ply"),
+])
+def test_accumulate_validates_options(small_recording, tmp_path, monkeypatch, args, message):
+    monkeypatch.chdir(tmp_path)
+    base = ["accumulate", small_recording] + ([] if "-o" in args else ["-o", "m.json"])
+    result = run(*base, *args)
+    assert result.exit_code == 2 and message in result.output
+
+
+def test_view_writes_rrd_and_png(small_recording, tmp_path):
+    model = tmp_path / "m.json"
+    run("accumulate", small_recording, "-o", model)
+    result = run("view", small_recording, model, "--rrd", tmp_path / "v.rrd", "--png", tmp_path / "v.png")
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "v.rrd").stat().st_size > 10000 and (tmp_path / "v.png").stat().st_size > 1000
+    assert run("view", model).exit_code == 2   # nothing to do without an output

@@ -1,0 +1,53 @@
+"""The paper's metric: the properties it states, with lengths in units of s_p."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from accumcli.metric import MetricThresholds, candidate_pairs, d_o, d_p, f_p
+
+S_P = 0.003
+X, Y = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
+ORIGIN = np.zeros(3)
+
+
+def test_orientation_distance_is_undirected():
+    assert d_o(X, -X) == 0.0
+    assert np.isclose(np.degrees(d_o(X, np.array([np.cos(0.2), np.sin(0.2), 0.0]))), np.degrees(0.2))
+
+
+def test_shift_along_the_segment_is_forgiven_up_to_half_its_length():
+    length = 0.012
+    limit = S_P + length / 2   # f_p <= s_p exactly up to this shift along u
+    assert f_p(ORIGIN, X, length, 0.99 * limit * X, S_P) < S_P
+    assert f_p(ORIGIN, X, length, 1.01 * limit * X, S_P) > S_P
+
+
+def test_sideways_shift_is_not_forgiven():
+    length = 0.012
+    assert np.isclose(f_p(ORIGIN, X, length, 0.004 * Y, S_P), 0.004)
+    assert d_p(ORIGIN, X, length, 0.004 * Y, X, length, S_P) > S_P
+
+
+def test_f_p_is_asymmetric_and_d_p_takes_the_smaller():
+    long_segment, short_segment = 0.030, 0.002
+    p_short = 0.012 * X  # inside the long segment's ellipse, far outside the short one's
+    forward = f_p(ORIGIN, X, long_segment, p_short, S_P)
+    backward = f_p(p_short, X, short_segment, ORIGIN, S_P)
+    assert forward < S_P < backward
+    assert d_p(ORIGIN, X, long_segment, p_short, X, short_segment, S_P) == forward
+
+
+def test_candidate_pairs_match_brute_force():
+    rng = np.random.default_rng(0)
+    n = 300
+    ca, cb = rng.uniform(0, 0.05, (n, 3)), rng.uniform(0, 0.05, (n, 3))
+    da, db = (v / np.linalg.norm(v, axis=1, keepdims=True) for v in rng.normal(size=(2, n, 3)))
+    db[: n // 2] = da[: n // 2]
+    la, lb = rng.uniform(0.005, 0.02, n), rng.uniform(0.005, 0.02, n)
+    th = MetricThresholds(S_P, 10.0)
+    i, j, cost = candidate_pairs(ca, da, la, cb, db, lb, th, neighbours=n)
+    I, J = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    ok = (d_o(da[I], db[J]) <= np.radians(10)) & (d_p(ca[I], da[I], la[I], cb[J], db[J], lb[J], S_P) <= S_P)
+    assert set(zip(i.tolist(), j.tolist())) == set(zip(*np.nonzero(ok)))
+    assert len(i) > 0 and np.all((cost >= 0) & (cost <= 2))
