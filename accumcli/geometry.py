@@ -66,9 +66,9 @@ def se3_exp(xi: np.ndarray) -> np.ndarray:
 
 
 def rotation_angle_deg(R: np.ndarray) -> float:
-    """Angle in degrees of a (3, 3) rotation."""
-    c = (np.trace(R) - 1.0) / 2.0
-    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+    """Angle in degrees of a (3, 3) rotation (from its rotation vector: arccos of the trace
+    loses precision near zero)."""
+    return float(np.degrees(Rotation.from_matrix(R).magnitude()))
 
 
 def pose_error(T_est: np.ndarray, T_true: np.ndarray) -> tuple[float, float]:

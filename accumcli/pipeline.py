@@ -3,38 +3,60 @@ motion, and the accumulation core, one frame at a time."""
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .accumulate import Accumulator, StepStats, UpdateRule
 from .extract import ExtractParams, FrameSegments, extract_frame
-from .geometry import invert
+from .geometry import invert, mean_transform, pose_error, rotate_vectors
 from .line_model import FrameContext, LineModelParams, LineSegmentType, to_model
 from .lines2d import StageTimes
 from .recording import StereoFrame
 from .segments import Segments
+from .track import PoseEstimate, TrackParams, refine_pose
 
 
 @dataclass(frozen=True)
 class AccumulateParams:
+    """``motion``: 'gripper' uses the recorded pose of every frame (the paper); 'tracked' first
+    refines it on the images against the current model (``track.refine_pose``) once the model has
+    ``min_tracking_segments`` accepted segments, and uses the refined pose where tracking succeeds
+    and moves the recorded one by less than ``max_correction_deg`` / ``max_correction_m``."""
+
     extract: ExtractParams = field(default_factory=ExtractParams)
     line_model: LineModelParams = field(default_factory=LineModelParams)
     rule: UpdateRule = field(default_factory=UpdateRule)
+    motion: str = "gripper"
+    track: TrackParams = field(default_factory=TrackParams)
+    min_tracking_segments: int = 30
+    max_correction_deg: float = 10.0
+    max_correction_m: float = 0.03
 
 
 @dataclass
 class AccumulationStep:
-    """One frame's contribution: its extraction, the pose used, and the update's counts."""
+    """One frame's contribution: its extraction, the pose used (and, with tracked motion, the
+    refinement's estimate), and the update's counts."""
 
     frame: StereoFrame
     extraction: FrameSegments
     T_camera_object: np.ndarray
     stats: StepStats
+    tracking: PoseEstimate | None = None
 
 
 class LineAccumulation:
-    """The model of one object, grown frame by frame (object frame ``frame_id``)."""
+    """The model of one object, grown frame by frame (object frame ``frame_id``).
+
+    With tracked motion the model is built in the frame of the first recorded
+    pose, which carries that pose's error; every refined frame measures the
+    offset ``T_recorded^-1 T_refined`` between the recorded object frame and
+    the model's. The recorded poses are unbiased, so the mean offset is the
+    first pose's error, and ``model()`` returns the model moved by it into the
+    object frame (the gauge of the model is fixed by all frames, not one).
+    """
 
     def __init__(self, params: AccumulateParams = AccumulateParams(), frame_id: str = "gripper",
                  camera_frame: str = "camera_left"):
@@ -43,6 +65,7 @@ class LineAccumulation:
         self.entity_type = LineSegmentType(params.line_model)
         self.core = Accumulator(self.entity_type, self.entity_type.empty(frame_id), params.rule)
         self.times = StageTimes()
+        self.offsets: list[np.ndarray] = []   # T_recorded^-1 T_used of the refined frames
 
     def extract(self, frame: StereoFrame) -> FrameSegments:
         return extract_frame(frame, self.params.extract, self.camera_frame, self.times)
@@ -51,10 +74,34 @@ class LineAccumulation:
              extraction: FrameSegments | None = None) -> AccumulationStep:
         """Extract (unless given) and accumulate one frame seen at pose ``T_camera_object``."""
         extraction = extraction or self.extract(frame)
+        estimate = None
+        if self.params.motion == "tracked":
+            T_camera_object, estimate = self._refined(frame, T_camera_object)
         context = FrameContext(T_camera_object, frame.intrinsics)
         stats = self.core.update(extraction.segments, invert(T_camera_object), context)
-        return AccumulationStep(frame, extraction, T_camera_object, stats)
+        return AccumulationStep(frame, extraction, T_camera_object, stats, estimate)
+
+    def _refined(self, frame: StereoFrame, T_recorded: np.ndarray) -> tuple[np.ndarray, PoseEstimate | None]:
+        p = self.params
+        model = to_model(self.core.entities, self.core.confidence, self.core.observations)
+        if model.accepted.sum() < p.min_tracking_segments:
+            return T_recorded, None
+        t0 = time.perf_counter()
+        estimate = refine_pose(model, frame, T_recorded, p.track)
+        self.times.add("tracking", t0)
+        rotation, translation = pose_error(estimate.T_camera_object, T_recorded)
+        if estimate.status != "tracked" or rotation > p.max_correction_deg or translation > p.max_correction_m:
+            return T_recorded, estimate
+        self.offsets.append(invert(T_recorded) @ estimate.T_camera_object)
+        return estimate.T_camera_object, estimate
 
     def model(self) -> Segments:
-        """The current model: every live segment with its confidence and observation count."""
-        return to_model(self.core.entities, self.core.confidence, self.core.observations)
+        """The current model: every live segment with its confidence and observation count (with
+        tracked motion, moved into the object frame by the mean offset; see the class docstring)."""
+        model = to_model(self.core.entities, self.core.confidence, self.core.observations)
+        if not self.offsets:
+            return model
+        G = mean_transform(np.stack(self.offsets))
+        moved = model.transformed(G, model.frame_id)
+        moved.extra = {**model.extra, "view_direction": rotate_vectors(G, model.extra["view_direction"])}
+        return moved

@@ -1,0 +1,358 @@
+"""Pose of the object from its accumulated model (the paper's section 3), and the
+re-acquisition of a lost pose.
+
+``refine_pose`` moves a pose until the model's accepted segments, projected
+into both rectified images, lie on image edges:
+
+- sample points along each visible model segment (in front of the camera,
+  inside the image, and, when the model carries them, within its cone of
+  viewing directions plus ``aspect_margin_deg``);
+- for each point and image, search along the projected segment's normal for
+  the strongest gradient whose orientation agrees with the normal
+  (polarity-free), within ``search_px``, with a sub-pixel parabola;
+- Gauss-Newton on SE(3) (left-multiplied increments in the camera frame)
+  over the signed point-to-line distances in both images, Tukey-weighted
+  (``tukey_px``), coarse to fine: each level searches again at the current
+  pose with a smaller range.
+
+A pose is ``tracked`` when at least ``min_inliers`` points (and
+``min_inlier_fraction`` of those measured) end within ``inlier_px`` and their
+RMS distance is at most ``max_rms_px``; otherwise ``lost``.
+
+``PoseTracker`` follows a sequence: constant-velocity prediction, refinement,
+and after a loss re-acquisition, first from the last good pose with a wide
+search, then by RANSAC over 3D-3D segment correspondences
+(``ransac_pose``): the angle and the distance between the lines of two
+segments are invariant under rigid motion, so pairs of the frame's extracted
+segments are matched to model pairs with the same invariants, each match
+proposes a pose, and the pose that brings the most model segments onto
+extracted ones is refined on the images.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .geometry import invert, make_transform, rotate_vectors, se3_exp, transform_points
+from .lines2d import sample
+from .recording import StereoFrame, StereoIntrinsics
+from .segments import Segments
+
+
+@dataclass(frozen=True)
+class TrackParams:
+    samples_per_segment: int = 3
+    search_px: tuple = (24.0, 10.0, 4.0)     # coarse to fine
+    iterations_per_level: int = 3
+    tukey_px: tuple = (8.0, 4.0, 2.5)
+    min_gradient: float = 3.0                # grey levels per pixel
+    min_orientation_cos: float = 0.85        # gradient vs projected normal
+    aspect_margin_deg: float = 25.0
+    inlier_px: float = 1.5
+    min_inliers: int = 30
+    min_inlier_fraction: float = 0.3
+    max_rms_px: float = 1.2
+    reacquire_search_px: tuple = (48.0, 24.0, 10.0, 4.0)
+    reacquire_tukey_px: tuple = (16.0, 8.0, 4.0, 2.5)
+
+
+@dataclass
+class PoseEstimate:
+    """T_camera_object (4, 4); residual: RMS distance of the inliers, px; inliers / measured
+    points; status 'tracked' or 'lost'; how it was found ('refined', 'wide', 'ransac')."""
+
+    T_camera_object: np.ndarray
+    residual_px: float
+    inliers: int
+    measured: int
+    status: str
+    method: str = "refined"
+
+
+@dataclass
+class ImageGradients:
+    """gx, gy: (H, W) float32 gradients (grey levels per pixel) of one rectified image."""
+
+    gx: np.ndarray
+    gy: np.ndarray
+
+    @classmethod
+    def of(cls, image: np.ndarray, blur_sigma: float = 1.0) -> "ImageGradients":
+        import cv2
+
+        blurred = cv2.GaussianBlur(image, (0, 0), blur_sigma)
+        return cls(cv2.Sobel(blurred, cv2.CV_32F, 1, 0, ksize=3) / 8.0,
+                   cv2.Sobel(blurred, cv2.CV_32F, 0, 1, ksize=3) / 8.0)
+
+
+def model_samples(model: Segments, per_segment: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points (S, 3) along the model's segments (object frame), their directions (S, 3) and segment (S,)."""
+    s = (np.arange(per_segment) + 0.5) / per_segment - 0.5
+    points = model.centers[:, None, :] + (s[None, :, None] * model.lengths[:, None, None]) * model.directions[:, None, :]
+    owner = np.repeat(np.arange(len(model)), per_segment)
+    return points.reshape(-1, 3), np.repeat(model.directions, per_segment, axis=0), owner
+
+
+def visible(model: Segments, T_camera_object: np.ndarray, intr: StereoIntrinsics, margin_deg: float,
+            border_px: float = 4.0) -> np.ndarray:
+    """(N,) bool: model segments in front of the camera, inside both images, and (if the model has
+    ``view_direction`` and ``view_spread_deg``) seen from within their cone of views plus ``margin_deg``."""
+    ends = transform_points(T_camera_object, model.endpoints().reshape(-1, 3))
+    uv_l, uv_r, z = intr.project(ends)
+    ok = z > 0.05
+    for uv in (uv_l, uv_r):
+        ok &= (uv[:, 0] >= border_px) & (uv[:, 0] <= intr.width - 1 - border_px) & (uv[:, 1] >= border_px) & \
+              (uv[:, 1] <= intr.height - 1 - border_px)
+    ok = ok.reshape(-1, 2).all(axis=1)
+    if "view_direction" in model.extra and "view_spread_deg" in model.extra:
+        to_camera = invert(T_camera_object)[:3, 3] - model.centers
+        to_camera /= np.linalg.norm(to_camera, axis=1, keepdims=True)
+        angle = np.degrees(np.arccos(np.clip(np.sum(to_camera * model.extra["view_direction"], axis=1), -1, 1)))
+        ok &= angle <= model.extra["view_spread_deg"] + margin_deg
+    return ok
+
+
+def _measure(points_cam, dirs_cam, intr: StereoIntrinsics, grads: tuple, search: float, params: TrackParams):
+    """Edge search along the projected normals. Returns per image (left, right) a tuple
+    (uv (S, 2), normal (S, 2), offset (S,) px along the normal to the edge, found (S,) bool)."""
+    out = []
+    steps = np.arange(-np.ceil(search), np.ceil(search) + 1)
+    prior = np.exp(-0.5 * (steps / max(search, 1.0)) ** 2)
+    for side, grad in enumerate(grads):
+        shift = np.array([intr.baseline * side, 0.0, 0.0])
+        p = points_cam - shift
+        q = p + 0.002 * dirs_cam
+        uv = np.column_stack([intr.fx * p[:, 0] / p[:, 2] + intr.cx, intr.fy * p[:, 1] / p[:, 2] + intr.cy])
+        uv2 = np.column_stack([intr.fx * q[:, 0] / q[:, 2] + intr.cx, intr.fy * q[:, 1] / q[:, 2] + intr.cy])
+        d = uv2 - uv
+        d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
+        normal = np.column_stack([-d[:, 1], d[:, 0]])
+        x = uv[:, :1] + steps[None, :] * normal[:, :1]
+        y = uv[:, 1:] + steps[None, :] * normal[:, 1:]
+        gx, gy = sample(grad.gx, x, y), sample(grad.gy, x, y)
+        along = np.abs(gx * normal[:, :1] + gy * normal[:, 1:])
+        magnitude = np.hypot(gx, gy)
+        good = (along >= params.min_gradient) & (along >= params.min_orientation_cos * magnitude)
+        score = np.where(good, along, 0.0) * prior[None, :]
+        best = np.argmax(score, axis=1)
+        found = score[np.arange(len(best)), best] > 0
+        b = np.clip(best, 1, len(steps) - 2)
+        rows = np.arange(len(b))
+        m0, m1, m2 = along[rows, b - 1], along[rows, b], along[rows, b + 1]
+        curvature = m0 - 2 * m1 + m2
+        sub = np.where(curvature < 0, 0.5 * (m0 - m2) / np.where(curvature < 0, curvature, -1.0), 0.0)
+        offset = steps[best] + np.where(best == b, np.clip(sub, -0.5, 0.5), 0.0)
+        out.append((uv, normal, offset, found))
+    return out
+
+
+def _jacobian(points_cam: np.ndarray, normal: np.ndarray, intr: StereoIntrinsics, side: int) -> np.ndarray:
+    """(S, 6) derivative of n . pi(P) for a left-multiplied increment (rotation vector, translation)."""
+    X, Y, Z = points_cam[:, 0] - intr.baseline * side, points_cam[:, 1], points_cam[:, 2]
+    du = np.column_stack([intr.fx / Z, np.zeros_like(Z), -intr.fx * X / Z ** 2])
+    dv = np.column_stack([np.zeros_like(Z), intr.fy / Z, -intr.fy * Y / Z ** 2])
+    dpi = normal[:, :1] * du + normal[:, 1:] * dv                    # (S, 3): n^T dpi/dP
+    P = points_cam
+    rotation = np.cross(P, dpi)  # n^T dpi/dP (-[P]x) w = (P x dpi) . w
+    return np.column_stack([rotation, dpi])
+
+
+def refine_pose(model: Segments, frame: StereoFrame, T_init: np.ndarray, params: TrackParams = TrackParams(),
+                grads: tuple | None = None, search_px: tuple | None = None,
+                tukey_px: tuple | None = None) -> PoseEstimate:
+    """Refine ``T_init`` (T_camera_object) on the frame's images against the model's accepted segments."""
+    intr = frame.intrinsics
+    grads = grads or (ImageGradients.of(frame.left), ImageGradients.of(frame.right))
+    accepted = model.select(model.accepted) if len(model) else model
+    T = T_init.copy()
+    search_px, tukey_px = search_px or params.search_px, tukey_px or params.tukey_px
+    lost = PoseEstimate(T, float("inf"), 0, 0, "lost")
+    points_obj = dirs_obj = None
+    for search, tukey in zip(search_px, tukey_px):
+        keep = visible(accepted, T, intr, params.aspect_margin_deg)
+        if keep.sum() < 3:
+            return lost
+        points_obj, dirs_obj, _ = model_samples(accepted.select(keep), params.samples_per_segment)
+        P = transform_points(T, points_obj)
+        D = rotate_vectors(T, dirs_obj)
+        measurements = _measure(P, D, intr, grads, search, params)
+        for _ in range(params.iterations_per_level):
+            J_all, r_all = [], []
+            P = transform_points(T, points_obj)
+            for side, (uv0, normal, offset, found) in enumerate(measurements):
+                shift = np.array([intr.baseline * side, 0.0, 0.0])
+                p = P - shift
+                uv = np.column_stack([intr.fx * p[:, 0] / p[:, 2] + intr.cx, intr.fy * p[:, 1] / p[:, 2] + intr.cy])
+                target = uv0 + offset[:, None] * normal
+                r = np.sum((uv - target) * normal, axis=1)
+                J_all.append(_jacobian(P, normal, intr, side)[found])
+                r_all.append(r[found])
+            J, r = np.vstack(J_all), np.concatenate(r_all)
+            if len(r) < 6:
+                return lost
+            w = np.where(np.abs(r) < tukey, (1 - (r / tukey) ** 2) ** 2, 0.0)
+            H = (J * w[:, None]).T @ J + 1e-6 * np.eye(6)
+            step = np.linalg.solve(H, -(J * w[:, None]).T @ r)
+            T = se3_exp(step) @ T
+            if np.linalg.norm(step[:3]) < 1e-5 and np.linalg.norm(step[3:]) < 1e-6:
+                break
+    # final residuals at the final pose, against the finest measurements
+    P = transform_points(T, points_obj)
+    residuals = []
+    for side, (uv0, normal, offset, found) in enumerate(measurements):
+        p = P - np.array([intr.baseline * side, 0.0, 0.0])
+        uv = np.column_stack([intr.fx * p[:, 0] / p[:, 2] + intr.cx, intr.fy * p[:, 1] / p[:, 2] + intr.cy])
+        residuals.append(np.sum((uv - (uv0 + offset[:, None] * normal)) * normal, axis=1)[found])
+    r = np.abs(np.concatenate(residuals))
+    inliers = r <= params.inlier_px
+    rms = float(np.sqrt(np.mean(r[inliers] ** 2))) if inliers.any() else float("inf")
+    ok = (inliers.sum() >= params.min_inliers and inliers.mean() >= params.min_inlier_fraction
+          and rms <= params.max_rms_px)
+    return PoseEstimate(T, rms, int(inliers.sum()), len(r), "tracked" if ok else "lost")
+
+
+# -- re-acquisition by RANSAC over 3D-3D segment pairs -------------------------------------------------
+def _line_pair_invariants(c1, u1, c2, u2):
+    """Angle (deg, undirected, 0..90) between two lines and their distance (m); and the midpoint of
+    their common perpendicular (N, 3)."""
+    cos = np.abs(np.sum(u1 * u2, axis=1))
+    angle = np.degrees(np.arccos(np.clip(cos, 0, 1)))
+    n = np.cross(u1, u2)
+    n_norm = np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    distance = np.abs(np.sum((c2 - c1) * n / n_norm, axis=1))
+    # closest points: c1 + a u1, c2 + b u2
+    w = c1 - c2
+    b_ = np.sum(u1 * u2, axis=1)
+    d_ = np.sum(u1 * w, axis=1)
+    e_ = np.sum(u2 * w, axis=1)
+    denominator = np.maximum(1 - b_ ** 2, 1e-12)
+    a = (b_ * e_ - d_) / denominator
+    b = (e_ - b_ * d_) / denominator
+    midpoint = (c1 + a[:, None] * u1 + c2 + b[:, None] * u2) / 2
+    return angle, distance, midpoint
+
+
+def _pairs(segments: Segments, max_pairs: int, rng: np.random.Generator, max_span: float):
+    """Random pairs (i, j) of segments at 30..90 degrees whose centres are 1 cm .. max_span apart."""
+    n = len(segments)
+    if n < 2:
+        return np.zeros(0, int), np.zeros(0, int)
+    i = rng.integers(0, n, 4 * max_pairs)
+    j = rng.integers(0, n, 4 * max_pairs)
+    span = np.linalg.norm(segments.centers[i] - segments.centers[j], axis=1)
+    cos = np.abs(np.sum(segments.directions[i] * segments.directions[j], axis=1))
+    ok = (i != j) & (span > 0.01) & (span < max_span) & (cos < np.cos(np.radians(30)))
+    return i[ok][:max_pairs], j[ok][:max_pairs]
+
+
+def ransac_pose(model: Segments, observed: Segments, rng: np.random.Generator | None = None,
+                samples: int = 300, candidates: int = 4) -> tuple[np.ndarray | None, int]:
+    """A pose T_camera_object from 3D segments of a frame (camera frame) and a model (object frame),
+    and its support (number of model segments that land on an extracted one), or (None, 0)."""
+    rng = rng or np.random.default_rng(0)
+    accepted = model.select(model.accepted)
+    if len(accepted) < 4 or len(observed) < 4:
+        return None, 0
+    span = float(np.ptp(accepted.centers, axis=0).max()) + 0.02
+    mi, mj = _pairs(accepted, 20000, rng, span)
+    m_angle, m_dist, m_mid = _line_pair_invariants(accepted.centers[mi], accepted.directions[mi],
+                                                   accepted.centers[mj], accepted.directions[mj])
+    table = cKDTree(np.column_stack([m_angle / 4.0, m_dist / 0.003]))
+    fi, fj = _pairs(observed, samples, rng, span)
+    f_angle, f_dist, f_mid = _line_pair_invariants(observed.centers[fi], observed.directions[fi],
+                                                   observed.centers[fj], observed.directions[fj])
+    _, hits = table.query(np.column_stack([f_angle / 4.0, f_dist / 0.003]), k=candidates, distance_upper_bound=1.0)
+    tree = cKDTree(observed.centers)
+    best_T, best_support = None, 0
+    for k in range(len(fi)):
+        for h in np.atleast_1d(hits[k]):
+            if h >= len(mi):
+                continue
+            for T in _align(accepted.directions[[mi[h], mj[h]]], m_mid[h], observed.directions[[fi[k], fj[k]]],
+                            f_mid[k]):
+                centers = transform_points(T, accepted.centers)
+                dist, idx = tree.query(centers, distance_upper_bound=0.004)
+                found = np.isfinite(dist)
+                dirs = rotate_vectors(T, accepted.directions[found])
+                support = int(np.sum(np.abs(np.sum(dirs * observed.directions[idx[found]], axis=1)) > 0.95))
+                if support > best_support:
+                    best_T, best_support = T, support
+    return best_T, best_support
+
+
+def _align(model_dirs, model_mid, frame_dirs, frame_mid):
+    """Rigid transforms taking two model lines (directions (2, 3), common-perpendicular midpoint)
+    onto two frame lines, for the sign choices of the (undirected) directions."""
+    out = []
+    for s1, s2 in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+        a = np.stack([model_dirs[0], model_dirs[1], np.cross(model_dirs[0], model_dirs[1])])
+        f0, f1 = s1 * frame_dirs[0], s2 * frame_dirs[1]
+        b = np.stack([f0, f1, np.cross(f0, f1)])
+        U, _, Vt = np.linalg.svd(b.T @ a)
+        R = U @ np.diag([1, 1, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+        out.append(make_transform(R, frame_mid - R @ model_mid))
+    return out
+
+
+def _better(a: PoseEstimate, b: PoseEstimate) -> bool:
+    """Is estimate a better than b: tracked first, then more inliers (a clear margin), then a lower residual."""
+    if (a.status == "tracked") != (b.status == "tracked"):
+        return a.status == "tracked"
+    if abs(a.inliers - b.inliers) > 0.05 * max(a.inliers, b.inliers):
+        return a.inliers > b.inliers
+    return a.residual_px < b.residual_px
+
+
+@dataclass
+class PoseTracker:
+    """Follows the object through a sequence (see the module docstring)."""
+
+    model: Segments
+    params: TrackParams = field(default_factory=TrackParams)
+    history: list = field(default_factory=list)   # the last two tracked poses
+
+    def predict(self) -> list[np.ndarray]:
+        """Starting poses: constant velocity in the camera frame, and the last pose (the motion may
+        have turned back: a hand-held or swinging object often does)."""
+        if not self.history:
+            return []
+        if len(self.history) == 1:
+            return [self.history[-1]]
+        previous, last = self.history[-2], self.history[-1]
+        return [(last @ invert(previous)) @ last, last]
+
+    def update(self, frame: StereoFrame, T_guess: np.ndarray | None = None,
+               observe: Callable[[], Segments] | None = None) -> PoseEstimate:
+        """Estimate the pose in ``frame``; ``T_guess`` overrides the prediction (e.g. the first frame);
+        ``observe()`` (the frame's extracted 3D segments, asked for only when needed) enables
+        re-acquisition by RANSAC."""
+        grads = (ImageGradients.of(frame.left), ImageGradients.of(frame.right))
+        guesses = [T_guess] if T_guess is not None else self.predict()
+        estimate = None
+        for guess in guesses:
+            candidate = refine_pose(self.model, frame, guess, self.params, grads)
+            if estimate is None or _better(candidate, estimate):
+                estimate = candidate
+        if estimate is not None:
+            if estimate.status != "tracked" and self.history:
+                wide = refine_pose(self.model, frame, self.history[-1], self.params, grads,
+                                   self.params.reacquire_search_px, self.params.reacquire_tukey_px)
+                wide.method = "wide"
+                estimate = wide if wide.inliers > estimate.inliers else estimate
+        if (estimate is None or estimate.status != "tracked") and observe is not None:
+            T, _ = ransac_pose(self.model, observe())
+            if T is not None:
+                found = refine_pose(self.model, frame, T, self.params, grads, self.params.reacquire_search_px[1:],
+                                    self.params.reacquire_tukey_px[1:])
+                found.method = "ransac"
+                if estimate is None or found.inliers > estimate.inliers:
+                    estimate = found
+        if estimate is None:
+            estimate = PoseEstimate(np.full((4, 4), np.nan), float("inf"), 0, 0, "lost")
+        if estimate.status == "tracked":
+            self.history = (self.history + [estimate.T_camera_object])[-2:]
+        return estimate
