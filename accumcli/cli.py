@@ -394,6 +394,9 @@ def _model_outputs(ctx, param, value):
               help="Write a picture of the model (confidence as grey level, dark = high).")
 @click.option("--panel", type=click.Path(dir_okay=False), callback=_output_path,
               help="Write the last frame's input image, extraction and the model side by side.")
+@click.option("--motion", type=click.Choice(["gripper", "tracked"]), default="gripper", show_default=True,
+              help="gripper: the recorded poses (the paper); tracked: each refined on the images against the "
+                   "current model first.")
 @click.option("--position-threshold", type=click.FloatRange(0.1, 50.0), default=3.0, show_default=True,
               help="s_p of the metric, millimetres.")
 @click.option("--angle-threshold", type=click.FloatRange(0.5, 45.0), default=7.0, show_default=True,
@@ -402,8 +405,8 @@ def _model_outputs(ctx, param, value):
 @extraction_options
 @recording_options
 @click.pass_context
-def accumulate(ctx, recording, outputs, rrd, truth, history, png, panel, position_threshold, angle_threshold,
-               frame_range, extract_params, recording_kwargs):
+def accumulate(ctx, recording, outputs, rrd, truth, history, png, panel, motion, position_threshold,
+               angle_threshold, frame_range, extract_params, recording_kwargs):
     """Accumulate a model of the object over the recording, with the gripper's known motion.
 
     \b
@@ -424,7 +427,7 @@ def accumulate(ctx, recording, outputs, rrd, truth, history, png, panel, positio
 
     line_model = LineModelParams(thresholds=MetricThresholds(position_threshold / 1000.0, angle_threshold),
                                  critical_angle_deg=extract_params.stereo.critical_angle_deg)
-    params = AccumulateParams(extract=extract_params, line_model=line_model)
+    params = AccumulateParams(extract=extract_params, line_model=line_model, motion=motion)
     edges = EdgeSamples.of(read_truth(truth)) if truth else None
     rows, skipped = [], 0
     with Recording(recording, **recording_kwargs) as rec, _rerun(rrd, "accumulate") as viz, \
@@ -438,6 +441,8 @@ def accumulate(ctx, recording, outputs, rrd, truth, history, png, panel, positio
                 continue
             step = acc.step(frame, frame.T_camera_object)
             row = {"frame_index": frame.index, "timestamp_ns": frame.timestamp_ns, **step.stats.__dict__}
+            if step.tracking is not None:
+                row.update(tracking=step.tracking.status, residual_px=step.tracking.residual_px)
             if edges is not None or viz:
                 model = acc.model()
             if edges is not None:
@@ -464,11 +469,121 @@ def accumulate(ctx, recording, outputs, rrd, truth, history, png, panel, positio
                + f": model of {len(model)} segments, {int(model.accepted.sum())} accepted (confidence >= 0.5)")
     if n:
         click.echo("time per frame: " + ", ".join(f"{k} {1000 * v / n:.1f} ms" for k, v in acc.times.seconds.items()))
+    if motion == "tracked":
+        click.echo(f"tracked motion: {len(acc.offsets)} of {n} frames used a refined pose")
     if edges is not None and rows:
-        last = rows[-1]
+        final = score_segments(model.select(model.accepted), edges).as_dict()
+        last = {**rows[-1], **final}
         click.echo(f"against {truth}: precision {last['precision']:.3f}, completeness {last['completeness']:.3f}, "
                    f"background {last['background']:.3f}")
     click.echo("wrote " + ", ".join([*outputs, *(p for p in (rrd, history, png, panel) if p)]))
+
+
+# -- track -----------------------------------------------------------------------------------------
+def _pose_option(ctx, param, value):
+    if value == "recording":
+        return None
+    try:
+        numbers = [float(x) for x in value.split(",")]
+        assert len(numbers) == 7 and np.linalg.norm(numbers[3:]) > 1e-9
+    except (ValueError, AssertionError):
+        raise click.BadParameter(f"expected 'recording' or x,y,z,qx,qy,qz,qw, found {value!r}") from None
+    from .geometry import transform_from_quat
+
+    return transform_from_quat(numbers[:3], np.array(numbers[3:]) / np.linalg.norm(numbers[3:]))
+
+
+def _track_outputs(ctx, param, value):
+    value = _output_path(ctx, param, value)
+    for path in value:
+        if not path.lower().endswith((".json", ".mcap")):
+            raise click.BadParameter(f"expected a .json or .mcap file, found {path!r}")
+    return value
+
+
+@main.command()
+@click.argument("model_file", metavar="MODEL.json", type=click.Path(dir_okay=False, exists=True))
+@click.argument("recording", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", "outputs", multiple=True, required=True, type=click.Path(dir_okay=False),
+              callback=_track_outputs,
+              help="Poses to write: .json (accum.poses/1) and/or .mcap (FrameTransforms for Foxglove); repeatable.")
+@click.option("--init", "init_pose", default="recording", show_default=True, callback=_pose_option,
+              metavar="recording|x,y,z,qx,qy,qz,qw",
+              help="Pose of the first frame: the recording's, or given (metres, quaternion).")
+@click.option("--rrd", type=click.Path(dir_okay=False), callback=_output_path,
+              help="Also save a Rerun recording: the model over the images at the estimated pose, the trajectory.")
+@click.option("--reacquire/--no-reacquire", default=True, show_default=True,
+              help="After a loss, search by RANSAC over the frame's extracted 3D segments.")
+@frames_option
+@extraction_options
+@recording_options
+@click.pass_context
+def track(ctx, model_file, recording, outputs, init_pose, rrd, reacquire, frame_range, extract_params,
+          recording_kwargs):
+    """Estimate the object's pose in every frame from its model and the images.
+
+    The recording's pose seeds the first frame only (or --init gives it);
+    after that, poses come from the images alone.
+
+    \b
+    Example:
+      accum track out/demo/model.json sample_data/sim_box.mcap -o out/poses.json -o out/poses.mcap
+    """
+    import time
+
+    from .extract import extract_frame
+    from .model_io import PoseTrack, read_model, write_poses
+    from .recording import Recording, RecordingWriter
+    from .track import PoseTracker
+
+    model = read_model(model_file)
+    if not model.accepted.any():
+        raise AccumError(f"{model_file}: the model has no accepted segment (confidence >= 0.5) to track")
+    tracker = PoseTracker(model)
+    times, poses, status, extra, trajectory = [], [], [], [], []
+    t0 = time.perf_counter()
+    with Recording(recording, require_pose=init_pose is None, **recording_kwargs) as rec, \
+            _rerun(rrd, "track") as viz, progress_bar(ctx, _frames_to_do(rec, frame_range), "tracking") as bar:
+        first = True
+        for frame in rec.frames(*frame_range):
+            guess = None
+            if first:
+                guess = init_pose if init_pose is not None else frame.T_camera_object
+                if guess is None:
+                    raise AccumError(f"{recording}: the first frame has no recorded pose ({frame.pose_problem}); "
+                                     "give one with --init")
+                first = False
+            observe = (lambda f=frame: extract_frame(f, extract_params, rec.camera_frame).segments) \
+                if reacquire else None
+            estimate = tracker.update(frame, guess, observe)
+            times.append(frame.timestamp_ns)
+            poses.append(estimate.T_camera_object)
+            status.append(estimate.status)
+            extra.append({"residual_px": round(estimate.residual_px, 4) if np.isfinite(estimate.residual_px)
+                          else None, "inliers": estimate.inliers, "method": estimate.method})
+            if estimate.status == "tracked":
+                trajectory.append(estimate.T_camera_object[:3, 3])
+            if viz:
+                viz.tracking(frame, model, estimate, trajectory)
+            bar(1)
+        camera_frame, object_frame = rec.camera_frame, rec.object_frame
+    seconds = time.perf_counter() - t0
+    track_ = PoseTrack(camera_frame, object_frame, np.array(times, np.int64), np.array(poses).reshape(-1, 4, 4),
+                       status, extra)
+    for path in outputs:
+        if path.lower().endswith(".json"):
+            write_poses(path, track_)
+        else:
+            with RecordingWriter(path) as writer:
+                for t_ns, T, st in zip(track_.times_ns, track_.poses, status):
+                    if st == "tracked":
+                        writer.transform(camera_frame, object_frame, T, int(t_ns))
+    n = len(times)
+    tracked = sum(s == "tracked" for s in status)
+    residuals = [e["residual_px"] for e, s in zip(extra, status) if s == "tracked"]
+    click.echo(f"{n} frames: {tracked} tracked ({tracked / max(n, 1):.0%}), median residual "
+               f"{np.median(residuals) if residuals else float('nan'):.2f} px, {n / max(seconds, 1e-9):.1f} frames/s")
+    click.echo("wrote " + ", ".join([*outputs, *([rrd] if rrd else [])]))
 
 
 # -- view ------------------------------------------------------------------------------------------

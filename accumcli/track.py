@@ -57,6 +57,8 @@ class TrackParams:
     min_inlier_fraction: float = 0.3
     max_rms_px: float = 1.2
     reacquire_search_px: tuple = (48.0, 24.0, 10.0, 4.0)
+    max_gap_s: float = 0.5                   # longer gaps between tracked frames: re-acquire
+    min_support_fraction: float = 0.2        # of visible model segments with a 3D counterpart, on re-acquisition
     reacquire_tukey_px: tuple = (16.0, 8.0, 4.0, 2.5)
 
 
@@ -265,23 +267,34 @@ def ransac_pose(model: Segments, observed: Segments, rng: np.random.Generator | 
     fi, fj = _pairs(observed, samples, rng, span)
     f_angle, f_dist, f_mid = _line_pair_invariants(observed.centers[fi], observed.directions[fi],
                                                    observed.centers[fj], observed.directions[fj])
-    _, hits = table.query(np.column_stack([f_angle / 4.0, f_dist / 0.003]), k=candidates, distance_upper_bound=1.0)
+    matches = table.query_ball_point(np.column_stack([f_angle / 4.0, f_dist / 0.003]), 1.0)
     tree = cKDTree(observed.centers)
     best_T, best_support = None, 0
     for k in range(len(fi)):
-        for h in np.atleast_1d(hits[k]):
-            if h >= len(mi):
-                continue
+        # a random few of the model pairs with these invariants (on a symmetric object, like a
+        # planar grid, many share them; the nearest few would always be the same)
+        chosen = rng.choice(matches[k], size=min(candidates, len(matches[k])), replace=False) \
+            if len(matches[k]) else []
+        for h in chosen:
             for T in _align(accepted.directions[[mi[h], mj[h]]], m_mid[h], observed.directions[[fi[k], fj[k]]],
                             f_mid[k]):
-                centers = transform_points(T, accepted.centers)
-                dist, idx = tree.query(centers, distance_upper_bound=0.004)
-                found = np.isfinite(dist)
-                dirs = rotate_vectors(T, accepted.directions[found])
-                support = int(np.sum(np.abs(np.sum(dirs * observed.directions[idx[found]], axis=1)) > 0.95))
+                support = support_3d(accepted, observed, T, tree)
                 if support > best_support:
                     best_T, best_support = T, support
     return best_T, best_support
+
+
+def support_3d(model: Segments, observed: Segments, T_camera_object: np.ndarray, tree: cKDTree | None = None,
+               distance: float = 0.004, cos_angle: float = 0.95) -> int:
+    """Number of model segments that land within ``distance`` of an extracted segment (camera frame)
+    and agree with its direction, at ``T_camera_object``."""
+    if len(observed) == 0 or len(model) == 0:
+        return 0
+    tree = tree or cKDTree(observed.centers)
+    dist, idx = tree.query(transform_points(T_camera_object, model.centers), distance_upper_bound=distance)
+    found = np.isfinite(dist)
+    dirs = rotate_vectors(T_camera_object, model.directions[found])
+    return int(np.sum(np.abs(np.sum(dirs * observed.directions[idx[found]], axis=1)) > cos_angle))
 
 
 def _align(model_dirs, model_mid, frame_dirs, frame_mid):
@@ -298,13 +311,9 @@ def _align(model_dirs, model_mid, frame_dirs, frame_mid):
     return out
 
 
-def _better(a: PoseEstimate, b: PoseEstimate) -> bool:
-    """Is estimate a better than b: tracked first, then more inliers (a clear margin), then a lower residual."""
-    if (a.status == "tracked") != (b.status == "tracked"):
-        return a.status == "tracked"
-    if abs(a.inliers - b.inliers) > 0.05 * max(a.inliers, b.inliers):
-        return a.inliers > b.inliers
-    return a.residual_px < b.residual_px
+def _rank(estimate: PoseEstimate) -> tuple:
+    """Order of estimates: tracked first, then more inliers (in steps of 5%), then a lower residual."""
+    return (estimate.status == "tracked", round(np.log1p(estimate.inliers) / np.log(1.05)), -estimate.residual_px)
 
 
 @dataclass
@@ -314,6 +323,7 @@ class PoseTracker:
     model: Segments
     params: TrackParams = field(default_factory=TrackParams)
     history: list = field(default_factory=list)   # the last two tracked poses
+    last_time_ns: int | None = None               # of the last tracked frame
 
     def predict(self) -> list[np.ndarray]:
         """Starting poses: constant velocity in the camera frame, and the last pose (the motion may
@@ -329,30 +339,46 @@ class PoseTracker:
                observe: Callable[[], Segments] | None = None) -> PoseEstimate:
         """Estimate the pose in ``frame``; ``T_guess`` overrides the prediction (e.g. the first frame);
         ``observe()`` (the frame's extracted 3D segments, asked for only when needed) enables
-        re-acquisition by RANSAC."""
+        re-acquisition by RANSAC.
+
+        When the motion since the last tracked frame is unknown (after a loss, or a gap longer than
+        ``max_gap_s``: snapshots rather than video) the frame is a re-acquisition: refinement from the
+        last pose and from a RANSAC pose compete, judged by 3D support (model segments landing on the
+        frame's extracted segments), since a wrong local minimum in a cluttered image can still find
+        plenty of edges.
+        """
         grads = (ImageGradients.of(frame.left), ImageGradients.of(frame.right))
+        gap = None if self.last_time_ns is None else (frame.timestamp_ns - self.last_time_ns) * 1e-9
+        reacquiring = T_guess is None and (not self.history or gap is None or gap > self.params.max_gap_s)
         guesses = [T_guess] if T_guess is not None else self.predict()
-        estimate = None
-        for guess in guesses:
-            candidate = refine_pose(self.model, frame, guess, self.params, grads)
-            if estimate is None or _better(candidate, estimate):
-                estimate = candidate
-        if estimate is not None:
-            if estimate.status != "tracked" and self.history:
-                wide = refine_pose(self.model, frame, self.history[-1], self.params, grads,
-                                   self.params.reacquire_search_px, self.params.reacquire_tukey_px)
-                wide.method = "wide"
-                estimate = wide if wide.inliers > estimate.inliers else estimate
-        if (estimate is None or estimate.status != "tracked") and observe is not None:
-            T, _ = ransac_pose(self.model, observe())
+        candidates = [refine_pose(self.model, frame, guess, self.params, grads) for guess in guesses]
+        if not reacquiring and candidates and candidates[0].status != "tracked" and self.history:
+            wide = refine_pose(self.model, frame, self.history[-1], self.params, grads,
+                               self.params.reacquire_search_px, self.params.reacquire_tukey_px)
+            wide.method = "wide"
+            candidates.append(wide)
+        best = max(candidates, key=_rank) if candidates else None
+        if (reacquiring or best is None or best.status != "tracked") and observe is not None:
+            observed = observe()
+            T, _ = ransac_pose(self.model, observed)
             if T is not None:
                 found = refine_pose(self.model, frame, T, self.params, grads, self.params.reacquire_search_px[1:],
                                     self.params.reacquire_tukey_px[1:])
                 found.method = "ransac"
-                if estimate is None or found.inliers > estimate.inliers:
-                    estimate = found
-        if estimate is None:
-            estimate = PoseEstimate(np.full((4, 4), np.nan), float("inf"), 0, 0, "lost")
-        if estimate.status == "tracked":
-            self.history = (self.history + [estimate.T_camera_object])[-2:]
-        return estimate
+                candidates.append(found)
+            accepted = self.model.select(self.model.accepted)
+            tree = cKDTree(observed.centers) if len(observed) else None
+            scored = [(support_3d(accepted, observed, c.T_camera_object, tree), c) for c in candidates
+                      if np.isfinite(c.T_camera_object).all()]
+            if scored:
+                support, best = max(scored, key=lambda item: (item[1].status == "tracked", item[0]))
+                visible_count = visible(accepted, best.T_camera_object, frame.intrinsics,
+                                        self.params.aspect_margin_deg).sum()
+                if support < self.params.min_support_fraction * max(visible_count, 1):
+                    best.status = "lost"
+        if best is None:
+            best = PoseEstimate(np.full((4, 4), np.nan), float("inf"), 0, 0, "lost")
+        if best.status == "tracked":
+            self.history = (self.history + [best.T_camera_object])[-2:]
+            self.last_time_ns = frame.timestamp_ns
+        return best

@@ -176,6 +176,19 @@ class RerunLog:
         self.set_frame(index, timestamp_ns)
         self.segments_3d("world/frame_segments", segments, np.eye(4))
 
+    def tracking(self, frame, model, estimate, trajectory: list) -> None:
+        """One frame of ``accum track``: world = left camera frame; the model placed at the
+        estimated pose (so it overlays the left image), the trajectory so far, residual and inliers."""
+        self.set_frame(frame.index, frame.timestamp_ns)
+        self.camera(frame.intrinsics, np.eye(4))
+        self.images(frame)
+        if np.isfinite(estimate.T_camera_object).all():
+            self.model(model.select(model.accepted), estimate.T_camera_object, "world/model")
+        if len(trajectory) > 1:
+            self.trajectory(np.array(trajectory))
+        self.scalars({"residual_px": estimate.residual_px, "inliers": estimate.inliers,
+                      "tracked": float(estimate.status == "tracked")})
+
     def close(self) -> None:
         """Flush everything to the sink and detach from it (an .rrd is complete afterwards)."""
         self.rec.flush()
