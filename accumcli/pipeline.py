@@ -21,9 +21,9 @@ from .track import PoseEstimate, TrackParams, refine_pose
 @dataclass(frozen=True)
 class AccumulateParams:
     """``motion``: 'gripper' uses the recorded pose of every frame (the paper); 'tracked' first
-    refines it on the images against the current model (``track.refine_pose``) once the model has
-    ``min_tracking_segments`` accepted segments, and uses the refined pose where tracking succeeds
-    and moves the recorded one by less than ``max_correction_deg`` / ``max_correction_m``."""
+    refines it on the images against the current model (``track.refine_pose``; against all its
+    segments until ``min_tracking_segments`` are accepted), and uses the refined pose where tracking
+    succeeds and moves the recorded one by less than ``max_correction_deg`` / ``max_correction_m``."""
 
     extract: ExtractParams = field(default_factory=ExtractParams)
     line_model: LineModelParams = field(default_factory=LineModelParams)
@@ -85,7 +85,11 @@ class LineAccumulation:
         p = self.params
         model = to_model(self.core.entities, self.core.confidence, self.core.observations)
         if model.accepted.sum() < p.min_tracking_segments:
-            return T_recorded, None
+            # bootstrap: until enough segments are accepted, refine against the tentative ones too
+            # (the background among them does not follow the object and falls to the robust weights)
+            model.confidence = np.maximum(model.confidence, 0.5)
+            if len(model) < p.min_tracking_segments:
+                return T_recorded, None
         t0 = time.perf_counter()
         estimate = refine_pose(model, frame, T_recorded, p.track)
         self.times.add("tracking", t0)

@@ -7,13 +7,16 @@ into both rectified images, lie on image edges:
 - sample points along each visible model segment (in front of the camera,
   inside the image, and, when the model carries them, within its cone of
   viewing directions plus ``aspect_margin_deg``);
-- for each point and image, search along the projected segment's normal for
-  the strongest gradient whose orientation agrees with the normal
-  (polarity-free), within ``search_px``, with a sub-pixel parabola;
-- Gauss-Newton on SE(3) (left-multiplied increments in the camera frame)
-  over the signed point-to-line distances in both images, Tukey-weighted
-  (``tukey_px``), coarse to fine: each level searches again at the current
-  pose with a smaller range.
+- for each point and image, search along the projected segment's normal,
+  within ``search_px``, for the ``candidates`` strongest gradient maxima whose
+  orientation agrees with the normal (polarity-free), each to sub-pixel
+  precision;
+- Gauss-Newton on SE(3) (increments in the camera frame, rotating about the
+  visible model's centroid) over the signed point-to-line distances in both images, each point taking,
+  at every iteration, the candidate nearest its current projection (parallel
+  edges a few pixels apart are common: the strongest is often the wrong one),
+  Tukey-weighted (``tukey_px``), coarse to fine: each level searches again at
+  the current pose with a smaller range.
 
 A pose is ``tracked`` when at least ``min_inliers`` points (and
 ``min_inlier_fraction`` of those measured) end within ``inlier_px`` and their
@@ -46,9 +49,10 @@ from .segments import Segments
 @dataclass(frozen=True)
 class TrackParams:
     samples_per_segment: int = 3
-    search_px: tuple = (24.0, 10.0, 4.0)     # coarse to fine
-    iterations_per_level: int = 3
-    tukey_px: tuple = (8.0, 4.0, 2.5)
+    candidates: int = 3                      # edges kept per point; each iteration takes the nearest
+    search_px: tuple = (40.0, 24.0, 12.0, 6.0, 3.0)     # coarse to fine
+    iterations_per_level: int = 5
+    tukey_px: tuple = (20.0, 12.0, 6.0, 4.0, 2.5)
     min_gradient: float = 3.0                # grey levels per pixel
     min_orientation_cos: float = 0.85        # gradient vs projected normal
     aspect_margin_deg: float = 25.0
@@ -56,10 +60,10 @@ class TrackParams:
     min_inliers: int = 30
     min_inlier_fraction: float = 0.3
     max_rms_px: float = 1.2
-    reacquire_search_px: tuple = (48.0, 24.0, 10.0, 4.0)
+    reacquire_search_px: tuple = (64.0, 40.0, 24.0, 12.0, 6.0, 3.0)
     max_gap_s: float = 0.5                   # longer gaps between tracked frames: re-acquire
     min_support_fraction: float = 0.2        # of visible model segments with a 3D counterpart, on re-acquisition
-    reacquire_tukey_px: tuple = (16.0, 8.0, 4.0, 2.5)
+    reacquire_tukey_px: tuple = (32.0, 20.0, 12.0, 6.0, 4.0, 2.5)
 
 
 @dataclass
@@ -120,10 +124,11 @@ def visible(model: Segments, T_camera_object: np.ndarray, intr: StereoIntrinsics
 
 def _measure(points_cam, dirs_cam, intr: StereoIntrinsics, grads: tuple, search: float, params: TrackParams):
     """Edge search along the projected normals. Returns per image (left, right) a tuple
-    (uv (S, 2), normal (S, 2), offset (S,) px along the normal to the edge, found (S,) bool)."""
+    (uv (S, 2), normal (S, 2), candidates (S, C) px along the normal to each edge found, NaN where
+    none): the ``params.candidates`` strongest local maxima of the gradient across the segment
+    (polarity-free, orientation within ``min_orientation_cos``), each to sub-pixel precision."""
     out = []
     steps = np.arange(-np.ceil(search), np.ceil(search) + 1)
-    prior = np.exp(-0.5 * (steps / max(search, 1.0)) ** 2)
     for side, grad in enumerate(grads):
         shift = np.array([intr.baseline * side, 0.0, 0.0])
         p = points_cam - shift
@@ -137,29 +142,44 @@ def _measure(points_cam, dirs_cam, intr: StereoIntrinsics, grads: tuple, search:
         y = uv[:, 1:] + steps[None, :] * normal[:, 1:]
         gx, gy = sample(grad.gx, x, y), sample(grad.gy, x, y)
         along = np.abs(gx * normal[:, :1] + gy * normal[:, 1:])
-        magnitude = np.hypot(gx, gy)
-        good = (along >= params.min_gradient) & (along >= params.min_orientation_cos * magnitude)
-        score = np.where(good, along, 0.0) * prior[None, :]
-        best = np.argmax(score, axis=1)
-        found = score[np.arange(len(best)), best] > 0
-        b = np.clip(best, 1, len(steps) - 2)
-        rows = np.arange(len(b))
-        m0, m1, m2 = along[rows, b - 1], along[rows, b], along[rows, b + 1]
+        good = (along >= params.min_gradient) & (along >= params.min_orientation_cos * np.hypot(gx, gy))
+        peak = np.zeros_like(good)
+        peak[:, 1:-1] = good[:, 1:-1] & (along[:, 1:-1] >= along[:, :-2]) & (along[:, 1:-1] > along[:, 2:])
+        strength = np.where(peak, along, 0.0)
+        order = np.argsort(-strength, axis=1)[:, : params.candidates]                   # (S, C)
+        rows = np.arange(len(uv))[:, None]
+        m0, m1, m2 = along[rows, order - 1], along[rows, order], along[rows, np.minimum(order + 1, len(steps) - 1)]
         curvature = m0 - 2 * m1 + m2
         sub = np.where(curvature < 0, 0.5 * (m0 - m2) / np.where(curvature < 0, curvature, -1.0), 0.0)
-        offset = steps[best] + np.where(best == b, np.clip(sub, -0.5, 0.5), 0.0)
-        out.append((uv, normal, offset, found))
+        candidates = np.where(strength[rows, order] > 0, steps[order] + np.clip(sub, -0.5, 0.5), np.nan)
+        out.append((uv, normal, candidates))
     return out
 
 
-def _jacobian(points_cam: np.ndarray, normal: np.ndarray, intr: StereoIntrinsics, side: int) -> np.ndarray:
-    """(S, 6) derivative of n . pi(P) for a left-multiplied increment (rotation vector, translation)."""
+def _residuals(P, measurements, intr: StereoIntrinsics):
+    """Per image: (signed distance (S,) from each point's current projection to its nearest
+    candidate edge along the normal, has-candidate mask (S,), normal (S, 2))."""
+    out = []
+    for side, (uv0, normal, candidates) in enumerate(measurements):
+        p = P - np.array([intr.baseline * side, 0.0, 0.0])
+        uv = np.column_stack([intr.fx * p[:, 0] / p[:, 2] + intr.cx, intr.fy * p[:, 1] / p[:, 2] + intr.cy])
+        moved = np.sum((uv - uv0) * normal, axis=1)                       # along the normal since measuring
+        gaps = moved[:, None] - candidates
+        nearest = np.nanargmin(np.where(np.isnan(gaps), np.inf, np.abs(gaps)), axis=1)
+        r = gaps[np.arange(len(gaps)), nearest]
+        out.append((np.nan_to_num(r), ~np.isnan(r), normal))
+    return out
+
+
+def _jacobian(points_cam: np.ndarray, normal: np.ndarray, intr: StereoIntrinsics, side: int,
+              pivot: np.ndarray) -> np.ndarray:
+    """(S, 6) derivative of n . pi(P) for an increment (rotation vector about ``pivot``,
+    translation), both in the camera frame."""
     X, Y, Z = points_cam[:, 0] - intr.baseline * side, points_cam[:, 1], points_cam[:, 2]
     du = np.column_stack([intr.fx / Z, np.zeros_like(Z), -intr.fx * X / Z ** 2])
     dv = np.column_stack([np.zeros_like(Z), intr.fy / Z, -intr.fy * Y / Z ** 2])
     dpi = normal[:, :1] * du + normal[:, 1:] * dv                    # (S, 3): n^T dpi/dP
-    P = points_cam
-    rotation = np.cross(P, dpi)  # n^T dpi/dP (-[P]x) w = (P x dpi) . w
+    rotation = np.cross(points_cam - pivot, dpi)  # n^T dpi/dP (-[P - c]x) w = ((P - c) x dpi) . w
     return np.column_stack([rotation, dpi])
 
 
@@ -183,15 +203,11 @@ def refine_pose(model: Segments, frame: StereoFrame, T_init: np.ndarray, params:
         D = rotate_vectors(T, dirs_obj)
         measurements = _measure(P, D, intr, grads, search, params)
         for _ in range(params.iterations_per_level):
-            J_all, r_all = [], []
             P = transform_points(T, points_obj)
-            for side, (uv0, normal, offset, found) in enumerate(measurements):
-                shift = np.array([intr.baseline * side, 0.0, 0.0])
-                p = P - shift
-                uv = np.column_stack([intr.fx * p[:, 0] / p[:, 2] + intr.cx, intr.fy * p[:, 1] / p[:, 2] + intr.cy])
-                target = uv0 + offset[:, None] * normal
-                r = np.sum((uv - target) * normal, axis=1)
-                J_all.append(_jacobian(P, normal, intr, side)[found])
+            pivot = P.mean(axis=0)  # rotating about the object, not the camera, decouples the increments
+            J_all, r_all = [], []
+            for side, (r, found, normal) in enumerate(_residuals(P, measurements, intr)):
+                J_all.append(_jacobian(P, normal, intr, side, pivot)[found])
                 r_all.append(r[found])
             J, r = np.vstack(J_all), np.concatenate(r_all)
             if len(r) < 6:
@@ -199,17 +215,13 @@ def refine_pose(model: Segments, frame: StereoFrame, T_init: np.ndarray, params:
             w = np.where(np.abs(r) < tukey, (1 - (r / tukey) ** 2) ** 2, 0.0)
             H = (J * w[:, None]).T @ J + 1e-6 * np.eye(6)
             step = np.linalg.solve(H, -(J * w[:, None]).T @ r)
-            T = se3_exp(step) @ T
+            R = se3_exp(step)[:3, :3]
+            T = make_transform(R, pivot + step[3:] - R @ pivot) @ T
             if np.linalg.norm(step[:3]) < 1e-5 and np.linalg.norm(step[3:]) < 1e-6:
                 break
     # final residuals at the final pose, against the finest measurements
     P = transform_points(T, points_obj)
-    residuals = []
-    for side, (uv0, normal, offset, found) in enumerate(measurements):
-        p = P - np.array([intr.baseline * side, 0.0, 0.0])
-        uv = np.column_stack([intr.fx * p[:, 0] / p[:, 2] + intr.cx, intr.fy * p[:, 1] / p[:, 2] + intr.cy])
-        residuals.append(np.sum((uv - (uv0 + offset[:, None] * normal)) * normal, axis=1)[found])
-    r = np.abs(np.concatenate(residuals))
+    r = np.abs(np.concatenate([res[found] for res, found, _ in _residuals(P, measurements, intr)]))
     inliers = r <= params.inlier_px
     rms = float(np.sqrt(np.mean(r[inliers] ** 2))) if inliers.any() else float("inf")
     ok = (inliers.sum() >= params.min_inliers and inliers.mean() >= params.min_inlier_fraction

@@ -38,3 +38,11 @@ def raw_recording(tmp_path_factory) -> str:
 def tf_tree_recording(tmp_path_factory) -> str:
     return _make(tmp_path_factory, "tftree", frames=5, width=320, height=240, seed=13, tf_tree=True,
                  shape="house")
+
+
+@pytest.fixture(scope="session")
+def noisy_pair(tmp_path_factory) -> tuple[str, str]:
+    """The same 16-frame recording with exact and with noisy (1.5 deg, 4 mm) gripper poses."""
+    common = dict(frames=16, width=640, height=480, seed=31)
+    return (_make(tmp_path_factory, "exact", **common),
+            _make(tmp_path_factory, "noisy", pose_noise_deg=1.5, pose_noise_m=0.004, **common))
