@@ -20,9 +20,14 @@ $(VENV)/.installed-test: pyproject.toml | $(BIN)/python
 
 demo: $(VENV)/.installed
 	@mkdir -p $(DEMO)
-	$(BIN)/accum info $(SAMPLE)
+	$(BIN)/accum accumulate $(SAMPLE) -o $(DEMO)/model.json -o $(DEMO)/model.ply --rrd $(DEMO)/run.rrd \
+		--png $(DEMO)/model.png --panel $(DEMO)/panel.png --truth sample_data/sim_box.truth.json
 	@echo
-	@echo "accum is installed in $(VENV); the recording summary above is of $(SAMPLE)"
+	@echo "Results in $(DEMO)/:"
+	@echo "  model.json, model.ply   the accumulated model (open the .ply in MeshLab or Open3D)"
+	@echo "  run.rrd                 the run in Rerun:  $(BIN)/rerun $(DEMO)/run.rrd"
+	@echo "  model.png, panel.png    pictures of the model and of the last frame"
+	@echo "Next: $(BIN)/accum --help"
 
 test: $(VENV)/.installed-test
 	$(BIN)/python -m pytest

@@ -10,8 +10,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_accumulate  # noqa: E402
 import bench_extract  # noqa: E402
 import bench_reader  # noqa: E402
+import bench_track  # noqa: E402
 
-SUITES = {"reader": bench_reader.main, "extract": bench_extract.main, "accumulate": bench_accumulate.main}
+SUITES = {"reader": bench_reader.main, "extract": bench_extract.main, "accumulate": bench_accumulate.main,
+          "track": bench_track.main}
 
 if __name__ == "__main__":
     chosen = sys.argv[1:] or list(SUITES)
