@@ -64,7 +64,7 @@ class LineModelParams:
     duplicate_shift: float = 0.25     # fraction of a length; closer centres along the line are duplicates
     max_views: int = 6                # viewing directions kept per segment
     view_step_deg: float = 10.0       # a new viewing direction is kept if this far from the stored ones
-    max_extent: float = 1.6           # a model segment covers at most this many observation lengths
+    max_extent: float = 2.0           # a model segment covers at most this many observation lengths
     reference_direction_sigma_deg: float = 2.0  # a direction this certain weighs as much as its confidence
 
 

@@ -54,8 +54,8 @@ class LineParams:
     min_fill: float = 0.6
     max_line_distance_px: float = 1.5  # pixels farther from their fitted line are dropped
     max_gap_px: float = 3.0           # a longer gap along a line ends a run of support
-    end_extension_px: float = 1.5     # pieces reach this far beyond a run's first and last pixel
-    junction_radius_px: float = 5.0   # runs ending this near another line's run meet it at the corner
+    end_extension_px: float = 2.5     # pieces reach this far beyond a run's first and last pixel
+    junction_radius_px: float = 7.0   # runs ending this near another line's run meet it at the corner
     detector: str = "hough"
 
 
