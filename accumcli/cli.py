@@ -269,7 +269,7 @@ def simulate(ctx, output, n_frames, size, shape, seed, raw, tf_tree, pose_noise,
 
     \b
     Example:
-      accum simulate -o out/prism.mcap --shape prism --seed 3 --frames 30
+      accum simulate -o out/prism.mcap --shape prism --seed 3 --frames 12
     """
     from .simulation import SimulationOptions, simulate as run
 
@@ -527,7 +527,7 @@ def track(ctx, model_file, recording, outputs, init_pose, rrd, reacquire, frame_
 
     \b
     Example:
-      accum track out/demo/model.json sample_data/sim_box.mcap -o out/poses.json -o out/poses.mcap
+      accum track out/model.json sample_data/sim_box.mcap -o out/poses.json -o out/poses.mcap
     """
     import time
 
@@ -609,8 +609,8 @@ def view(ctx, inputs, rrd, spawn, connect, png, png_frame, frame_range, recordin
 
     \b
     Examples:
-      accum view sample_data/sim_box.mcap out/demo/model.json --rrd out/view.rrd
-      accum view out/demo/model.json --png out/model.png
+      accum view sample_data/sim_box.mcap out/model.json out/poses.json --rrd out/view.rrd
+      accum view out/model.json --png out/model.png
     """
     from pathlib import Path
 

@@ -3,6 +3,7 @@ motion, and the accumulation core, one frame at a time."""
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass, field
 
@@ -16,6 +17,8 @@ from .lines2d import StageTimes
 from .recording import StereoFrame
 from .segments import Segments
 from .track import PoseEstimate, TrackParams, refine_pose
+
+log = logging.getLogger("accumcli")
 
 
 @dataclass(frozen=True)
@@ -79,6 +82,7 @@ class LineAccumulation:
             T_camera_object, estimate = self._refined(frame, T_camera_object)
         context = FrameContext(T_camera_object, frame.intrinsics)
         stats = self.core.update(extraction.segments, invert(T_camera_object), context)
+        log.debug("frame %d: %s", frame.index, ", ".join(f"{k} {v}" for k, v in stats.__dict__.items()))
         return AccumulationStep(frame, extraction, T_camera_object, stats, estimate)
 
     def _refined(self, frame: StereoFrame, T_recorded: np.ndarray) -> tuple[np.ndarray, PoseEstimate | None]:

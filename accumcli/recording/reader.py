@@ -127,6 +127,8 @@ class Recording:
             raise
         self._rectifiers: dict = {}
         self._warned_early_calibration = False
+        log.info("%s: about %d stereo frames, %d calibration message(s), transform frames: %s", self.path,
+                 self.frame_count_hint, len(self.calibrations["left"]), ", ".join(sorted(self.tree.frames)) or "none")
 
     # -- opening and validation ---------------------------------------------------------
     def _fail(self, problem: str) -> RecordingError:
