@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 SAMPLE := sample_data/sim_box.mcap
 DEMO := out/demo
 
-.PHONY: demo test bench sample clean
+.PHONY: demo test bench figures sample clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -34,6 +34,10 @@ test: $(VENV)/.installed-test
 
 bench: $(VENV)/.installed-test
 	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python benchmarks/run.py
+
+# Accuracy figures of extract, accumulate and track against ground truth (a few minutes).
+figures: $(VENV)/.installed
+	ACCUM=$(BIN)/accum bash benchmarks/figures.sh
 
 # Regenerate the committed synthetic sample (deterministic: same bytes for the same seed).
 sample: $(VENV)/.installed

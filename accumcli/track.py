@@ -22,14 +22,18 @@ A pose is ``tracked`` when at least ``min_inliers`` points (and
 ``min_inlier_fraction`` of those measured) end within ``inlier_px`` and their
 RMS distance is at most ``max_rms_px``; otherwise ``lost``.
 
-``PoseTracker`` follows a sequence: constant-velocity prediction, refinement,
-and after a loss re-acquisition, first from the last good pose with a wide
-search, then by RANSAC over 3D-3D segment correspondences
-(``ransac_pose``): the angle and the distance between the lines of two
-segments are invariant under rigid motion, so pairs of the frame's extracted
-segments are matched to model pairs with the same invariants, each match
-proposes a pose, and the pose that brings the most model segments onto
-extracted ones is refined on the images.
+``PoseTracker`` follows a sequence. It refines from both the constant-velocity
+prediction and the last pose (the better wins: an object swung back and forth
+turns back between frames). After a loss, or when the frames are too far apart
+in time for any prediction (``max_gap_s``: snapshots, not video), it
+re-acquires: from the last good pose with a wide search, and by RANSAC over
+3D-3D segment correspondences (``ransac_pose``). The angle and the distance
+between the lines of two segments are invariant under rigid motion, so pairs
+of the frame's extracted segments are matched to model pairs with the same
+invariants; each match proposes a pose, the few distinct poses that bring the
+most model segments onto extracted ones are refined on the images, and the
+best refined one wins if enough model segments find a 3D counterpart there
+(``min_support_fraction``).
 """
 
 from __future__ import annotations
@@ -63,6 +67,7 @@ class TrackParams:
     reacquire_search_px: tuple = (64.0, 40.0, 24.0, 12.0, 6.0, 3.0)
     max_gap_s: float = 0.5                   # longer gaps between tracked frames: re-acquire
     min_support_fraction: float = 0.2        # of visible model segments with a 3D counterpart, on re-acquisition
+    ransac_hypotheses: int = 5               # distinct RANSAC poses refined on the images
     reacquire_tukey_px: tuple = (32.0, 20.0, 12.0, 6.0, 4.0, 2.5)
 
 
@@ -264,9 +269,11 @@ def _pairs(segments: Segments, max_pairs: int, rng: np.random.Generator, max_spa
 
 
 def ransac_pose(model: Segments, observed: Segments, rng: np.random.Generator | None = None,
-                samples: int = 300, candidates: int = 4) -> tuple[np.ndarray | None, int]:
-    """A pose T_camera_object from 3D segments of a frame (camera frame) and a model (object frame),
-    and its support (number of model segments that land on an extracted one), or (None, 0)."""
+                samples: int = 600, candidates: int = 4, keep: int = 1):
+    """The best pose T_camera_object from 3D segments of a frame (camera frame) and a model (object
+    frame), and its support (number of model segments that land on an extracted one), or (None, 0).
+    With ``keep`` > 1, a list of up to ``keep`` distinct (pose, support) pairs, best first (a
+    symmetric object has several poses of nearly equal support; the images decide)."""
     rng = rng or np.random.default_rng(0)
     accepted = model.select(model.accepted)
     if len(accepted) < 4 or len(observed) < 4:
@@ -281,7 +288,7 @@ def ransac_pose(model: Segments, observed: Segments, rng: np.random.Generator | 
                                                    observed.centers[fj], observed.directions[fj])
     matches = table.query_ball_point(np.column_stack([f_angle / 4.0, f_dist / 0.003]), 1.0)
     tree = cKDTree(observed.centers)
-    best_T, best_support = None, 0
+    found: list[tuple[int, np.ndarray]] = []
     for k in range(len(fi)):
         # a random few of the model pairs with these invariants (on a symmetric object, like a
         # planar grid, many share them; the nearest few would always be the same)
@@ -291,9 +298,24 @@ def ransac_pose(model: Segments, observed: Segments, rng: np.random.Generator | 
             for T in _align(accepted.directions[[mi[h], mj[h]]], m_mid[h], observed.directions[[fi[k], fj[k]]],
                             f_mid[k]):
                 support = support_3d(accepted, observed, T, tree)
-                if support > best_support:
-                    best_T, best_support = T, support
-    return best_T, best_support
+                if len(found) < keep or support > found[-1][0]:
+                    found = _insert_distinct(found, support, T, keep)
+    if keep == 1:
+        return (found[0][1], found[0][0]) if found else (None, 0)
+    return [(T, support) for support, T in found]
+
+
+def _insert_distinct(found: list, support: int, T: np.ndarray, keep: int) -> list:
+    """Insert (support, T) into a best-first list of at most ``keep`` poses at least 10 degrees or
+    2 cm apart; a pose near a listed one replaces it only if its support is higher."""
+    for i, (other_support, other) in enumerate(found):
+        rotation = np.degrees(np.arccos(np.clip((np.trace(other[:3, :3].T @ T[:3, :3]) - 1) / 2, -1, 1)))
+        if rotation < 10 and np.linalg.norm(other[:3, 3] - T[:3, 3]) < 0.02:
+            if support <= other_support:
+                return found
+            found = found[:i] + found[i + 1:]
+            break
+    return sorted(found + [(support, T)], key=lambda item: -item[0])[:keep]
 
 
 def support_3d(model: Segments, observed: Segments, T_camera_object: np.ndarray, tree: cKDTree | None = None,
@@ -372,8 +394,7 @@ class PoseTracker:
         best = max(candidates, key=_rank) if candidates else None
         if (reacquiring or best is None or best.status != "tracked") and observe is not None:
             observed = observe()
-            T, _ = ransac_pose(self.model, observed)
-            if T is not None:
+            for T, _ in ransac_pose(self.model, observed, keep=self.params.ransac_hypotheses):
                 found = refine_pose(self.model, frame, T, self.params, grads, self.params.reacquire_search_px[1:],
                                     self.params.reacquire_tukey_px[1:])
                 found.method = "ransac"
@@ -383,7 +404,7 @@ class PoseTracker:
             scored = [(support_3d(accepted, observed, c.T_camera_object, tree), c) for c in candidates
                       if np.isfinite(c.T_camera_object).all()]
             if scored:
-                support, best = max(scored, key=lambda item: (item[1].status == "tracked", item[0]))
+                support, best = max(scored, key=lambda item: (item[1].status == "tracked", *_rank(item[1])[1:]))
                 visible_count = visible(accepted, best.T_camera_object, frame.intrinsics,
                                         self.params.aspect_margin_deg).sum()
                 if support < self.params.min_support_fraction * max(visible_count, 1):

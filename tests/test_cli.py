@@ -122,3 +122,21 @@ def test_view_writes_rrd_and_png(small_recording, tmp_path):
     assert result.exit_code == 0, result.output
     assert (tmp_path / "v.rrd").stat().st_size > 10000 and (tmp_path / "v.png").stat().st_size > 1000
     assert run("view", model).exit_code == 2   # nothing to do without an output
+
+
+@pytest.mark.parametrize("defect, message", [
+    ({"corrupt_left": (2,)}, "frame 2 (1.200 s): cannot decode png image bytes"),
+    ({"unpaired_right": (1,)}, "has no partner within 1.000 ms: skipped"),
+])
+def test_a_bad_frame_is_a_warning_and_the_others_go_on(tmp_path, defect, message):
+    import json
+
+    from . import helpers
+
+    path = helpers.write(tmp_path / "defect.mcap", n=5, **defect)
+    out = tmp_path / "frames.jsonl"
+    result = run("extract", path, "-o", out)
+    assert result.exit_code == 0, result.output
+    assert any(line.startswith("warning: ") and message in line for line in result.output.splitlines())
+    assert len(out.read_text().splitlines()) == 4
+    assert all(json.loads(line)["format"] == "accum.model/1" for line in out.read_text().splitlines())

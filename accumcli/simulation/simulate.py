@@ -156,7 +156,8 @@ def simulate(output: str, options: SimulationOptions = SimulationOptions(), topi
     object_top = min(p.vertices[:, 1].min() for p in obj.polygons)
     gripper = make_gripper(half_width, object_top)
     background = make_background(rng, camera.width / 2 / camera.fx)
-    calibrations, raw_maps = _calibrations(o, camera, rng)
+    # the raw calibration draws from its own generator: with and without --raw, scene and motion are the same
+    calibrations, raw_maps = _calibrations(o, camera, np.random.default_rng([o.seed, 3]))
     phase = rng.uniform(0, 2 * np.pi)
     moving = obj.polygons + gripper.polygons
     edges = obj.edges + gripper.edges
@@ -199,9 +200,10 @@ def simulate(output: str, options: SimulationOptions = SimulationOptions(), topi
                 visible &= _visible(transform_points(T, samples), transform_points(T, tangents) -
                                     transform_points(T, np.zeros((1, 3))), camera, cv2.erode(layer.depth, kernel),
                                     clean, S, margin)
-                if o.raw:
-                    clean = cv2.remap(clean, *raw_maps[side == "right"], cv2.INTER_LINEAR,
-                                      borderMode=cv2.BORDER_REPLICATE)
+                if o.raw:  # sample the supersampled render, box-filtered, at the raw pixels: one interpolation
+                    map_x, map_y = ((m + 0.5) * S - 0.5 for m in raw_maps[side == "right"])
+                    clean = cv2.remap(cv2.blur(layer.color, (S, S)), map_x.astype(np.float32),
+                                      map_y.astype(np.float32), cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
                 image = finish_image(clean, gain, o.blur_sigma, o.noise_sigma, rng)
                 writer.image(getattr(topics, f"{side}_image"), image, int(t_ns), f"camera_{side}", o.encoding)
             seen += visible
