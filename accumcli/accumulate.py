@@ -20,9 +20,9 @@ by the known motion (the entity type's ``transform``):
    are weakened: ``L += log((1 - p_detect) / (1 - p_false))``. Entities
    that could not have been observed keep their confidence: an edge that
    turned out of view, or behind the object, is not punished.
-4. Unmatched observations join the model with confidence ``initial``.
-5. Model entities that duplicate each other (the entity type's ``same``) are
+4. Model entities that duplicate each other (the entity type's ``same``) are
    merged: they would otherwise compete for the same observations.
+5. Unmatched observations join the model with confidence ``initial``.
 6. Entities below ``floor`` are pruned, and so are tentative ones
    (confidence < 0.5) not confirmed for ``tentative_frames`` frames, which
    bounds the model's size on long recordings.
@@ -194,29 +194,25 @@ class Accumulator(Generic[E]):
         self.log_odds = np.minimum(self.log_odds + rule.hit * confirmed + rule.miss * missed, logit(rule.ceiling))
         self.observations = self.observations + confirmed
         self.last_confirmed = np.where(confirmed, self.frame, self.last_confirmed)
-        # new entities
-        fresh = np.ones(n_obs, bool)
-        fresh[oi] = False
-        n_new = int(fresh.sum())
-        if n_new:
-            self.entities = T.concatenate(self.entities, T.select(observed, np.flatnonzero(fresh)))
-            self.log_odds = np.concatenate([self.log_odds, np.full(n_new, logit(rule.initial))])
-            self.observations = np.concatenate([self.observations, np.ones(n_new, np.int64)])
-            self.last_confirmed = np.concatenate([self.last_confirmed, np.full(n_new, self.frame)])
         n_merged = self._consolidate(*candidates)
-        # pruning
+        # pruning of the old entities, and the new ones appended, in one rebuild of the arrays
+        # (a new entity corresponded to nothing: it can be neither pruned nor a duplicate yet)
         confidence = self.confidence
         stale = (confidence < 0.5) & (self.frame - self.last_confirmed >= rule.tentative_frames)
         alive = (confidence >= rule.floor) & ~stale
         n_pruned = int((~alive).sum()) - n_merged
-        if n_pruned or n_merged:
+        fresh = np.ones(n_obs, bool)
+        fresh[oi] = False
+        n_new = int(fresh.sum())
+        if n_pruned or n_merged or n_new:
             index = np.flatnonzero(alive)
-            self.entities = T.select(self.entities, index)
-            self.log_odds, self.observations = self.log_odds[index], self.observations[index]
-            self.last_confirmed = self.last_confirmed[index]
+            self.entities = T.concatenate(T.select(self.entities, index), T.select(observed, np.flatnonzero(fresh)))
+            self.log_odds = np.concatenate([self.log_odds[index], np.full(n_new, logit(rule.initial))])
+            self.observations = np.concatenate([self.observations[index], np.ones(n_new, np.int64)])
+            self.last_confirmed = np.concatenate([self.last_confirmed[index], np.full(n_new, self.frame)])
         self.frame += 1
-        return StepStats(observed=n_obs, confirmed=int(confirmed.sum()), missed=int(missed.sum()), new=n_new, pruned=n_pruned,
-                         merged=n_merged, size=len(self), accepted=int((self.confidence >= 0.5).sum()))
+        return StepStats(observed=n_obs, confirmed=int(confirmed.sum()), missed=int(missed.sum()), new=n_new,
+                         pruned=n_pruned, merged=n_merged, size=len(self), accepted=int((self.log_odds >= 0).sum()))
 
     def _consolidate(self, i: np.ndarray, j: np.ndarray) -> int:
         """Merge model entities (candidate pairs i, j) that the entity type deems the same:
