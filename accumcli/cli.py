@@ -187,6 +187,18 @@ def _output_path(ctx, param, value):
     return value
 
 
+def _outputs_of(*suffixes: str):
+    """A callback for repeatable outputs whose kind is told by the suffix (e.g. .json, .ply)."""
+
+    def check(ctx, param, value):
+        for path in _output_path(ctx, param, value):
+            if not path.lower().endswith(suffixes):
+                raise click.BadParameter(f"expected a {' or '.join(suffixes)} file, found {path!r}")
+        return value
+
+    return check
+
+
 # -- info -----------------------------------------------------------------------------------------
 @main.command()
 @click.argument("recording", type=click.Path(dir_okay=False))
@@ -277,7 +289,8 @@ def simulate(ctx, output, n_frames, size, shape, seed, raw, tf_tree, pose_noise,
         width, height = (int(x) for x in size.lower().split("x"))
         assert width >= 64 and height >= 48
     except (ValueError, AssertionError):
-        raise click.BadParameter(f"expected WIDTHxHEIGHT of at least 64x48, found {size!r}", param_hint="--size")
+        raise click.BadParameter(f"expected WIDTHxHEIGHT of at least 64x48, found {size!r}",
+                                 param_hint="--size") from None
     if not output.endswith(".mcap"):
         raise click.BadParameter(f"expected a name ending in .mcap, found {output!r}", param_hint="--output")
     options = SimulationOptions(frames=n_frames, width=width, height=height, shape=shape, seed=seed, raw=raw,
@@ -372,18 +385,11 @@ def _rerun(rrd, kind: str):
 
 
 # -- accumulate ----------------------------------------------------------------------------------
-def _model_outputs(ctx, param, value):
-    value = _output_path(ctx, param, value)
-    for path in value:
-        if not path.lower().endswith((".json", ".ply")):
-            raise click.BadParameter(f"expected a .json or .ply file, found {path!r}")
-    return value
-
-
 @main.command()
 @click.argument("recording", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", "outputs", multiple=True, required=True, type=click.Path(dir_okay=False),
-              callback=_model_outputs, help="Model to write: .json (the model) and/or .ply (line set); repeatable.")
+              callback=_outputs_of(".json", ".ply"),
+              help="Model to write: .json (the model) and/or .ply (line set); repeatable.")
 @click.option("--rrd", type=click.Path(dir_okay=False), callback=_output_path,
               help="Also save a Rerun recording: images, segments, the model by confidence, counts over time.")
 @click.option("--truth", type=click.Path(dir_okay=False, exists=True),
@@ -415,7 +421,6 @@ def accumulate(ctx, recording, outputs, rrd, truth, history, png, panel, motion,
       accum accumulate sample_data/chessboard/chessboard.mcap --object-frame board -o out/board.json
     """
     import json
-    from dataclasses import replace
 
     from .atomic import atomic_open
     from .evaluate import EdgeSamples, score_segments
@@ -493,19 +498,11 @@ def _pose_option(ctx, param, value):
     return transform_from_quat(numbers[:3], np.array(numbers[3:]) / np.linalg.norm(numbers[3:]))
 
 
-def _track_outputs(ctx, param, value):
-    value = _output_path(ctx, param, value)
-    for path in value:
-        if not path.lower().endswith((".json", ".mcap")):
-            raise click.BadParameter(f"expected a .json or .mcap file, found {path!r}")
-    return value
-
-
 @main.command()
 @click.argument("model_file", metavar="MODEL.json", type=click.Path(dir_okay=False, exists=True))
 @click.argument("recording", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", "outputs", multiple=True, required=True, type=click.Path(dir_okay=False),
-              callback=_track_outputs,
+              callback=_outputs_of(".json", ".mcap"),
               help="Poses to write: .json (accum.poses/1) and/or .mcap (FrameTransforms for Foxglove); repeatable.")
 @click.option("--init", "init_pose", default="recording", show_default=True, callback=_pose_option,
               metavar="recording|x,y,z,qx,qy,qz,qw",

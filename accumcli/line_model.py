@@ -44,9 +44,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
-from .geometry import invert, rotate_vectors, transform_points
+from .geometry import invert, transform_points
 from .metric import MetricThresholds, candidate_pairs, d_o, d_p
 from .recording import StereoIntrinsics
 from .segments import Segments, concatenate

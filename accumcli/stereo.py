@@ -45,12 +45,11 @@ length, or ``single_direction_sigma_deg`` for a segment alone).
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
 
-from .lines2d import Segments2D, StageTimes, sample
+from .lines2d import Segments2D, sample
 from .recording import StereoIntrinsics
 from .segments import Segments
 
@@ -74,7 +73,6 @@ class StereoParams:
     fit_outlier_px: float = 1.0
     default_disparity_sigma_px: float = 0.25
     single_direction_sigma_deg: float = 6.0  # direction uncertainty of a segment alone on its stretch
-    fitted_only: bool = False            # drop segments whose stretch is too short to fit
 
 
 @dataclass
@@ -266,8 +264,7 @@ def triangulate(left: Segments2D, right: Segments2D, m: Matches, intr: StereoInt
         fitted = (count[stretch] >= 3) & (spread[stretch] >= left.lengths[m.left])
         keep = ~fitted | (np.abs(residual) <= params.fit_outlier_px)
     fitted = fitted & keep
-    use = fitted if params.fitted_only else keep
-    idx = np.flatnonzero(use)
+    idx = np.flatnonzero(keep)
     half = (left.lengths[m.left] / 2)[:, None] * dirs
     along = np.sum(dirs * axis[stretch], axis=1) * left.lengths[m.left] / 2
     d_center = np.where(fitted, a[stretch] + b[stretch] * s, m.disparity)

@@ -103,7 +103,8 @@ class ImageGradients:
 def model_samples(model: Segments, per_segment: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Points (S, 3) along the model's segments (object frame), their directions (S, 3) and segment (S,)."""
     s = (np.arange(per_segment) + 0.5) / per_segment - 0.5
-    points = model.centers[:, None, :] + (s[None, :, None] * model.lengths[:, None, None]) * model.directions[:, None, :]
+    along = s[None, :, None] * model.lengths[:, None, None]
+    points = model.centers[:, None, :] + along * model.directions[:, None, :]
     owner = np.repeat(np.arange(len(model)), per_segment)
     return points.reshape(-1, 3), np.repeat(model.directions, per_segment, axis=0), owner
 

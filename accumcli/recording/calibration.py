@@ -94,8 +94,8 @@ class StereoRectifier:
             if cal.P[0, 0] <= 0 or cal.P[1, 1] <= 0:
                 raise RecordingError(f"{side} calibration: P has no focal length (uncalibrated camera)")
         if (left.width, left.height) != (right.width, right.height):
-            raise RecordingError(
-                f"left and right calibrations differ in size: {left.width}x{left.height} vs {right.width}x{right.height}")
+            raise RecordingError(f"left and right calibrations differ in size: {left.width}x{left.height} vs "
+                                 f"{right.width}x{right.height}")
         P_left, P_right = left.P, right.P
         if not np.allclose(P_left[:, :3], P_right[:, :3], rtol=1e-6, atol=1e-6):
             raise RecordingError("left and right P differ in their 3x3 part: the pair is not rectified to one camera")

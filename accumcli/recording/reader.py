@@ -335,7 +335,7 @@ class Recording:
         info.calibrations = len(self.calibrations["left"])
         counter: dict = {}
         problems: dict[str, int] = {}
-        for index, t_ns, left_msg, _ in self._pairs(warn=False, counter=counter):
+        for _, t_ns, left_msg, _ in self._pairs(warn=False, counter=counter):
             info.stereo_frames += 1
             info.first_ns = t_ns if info.first_ns is None else info.first_ns
             info.last_ns = t_ns

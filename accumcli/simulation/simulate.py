@@ -26,9 +26,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..atomic import atomic_open
-from ..geometry import interpolate, invert, make_transform, quat_from_transform, transform_points, unit
+from ..geometry import interpolate, make_transform, quat_from_transform, transform_points, unit
 from ..recording import CameraCalibration, RecordingWriter, Topics
-from .render import PinholeCamera, empty_layer, finish_image, rasterize, reduce, shade  # noqa: F401
+from .render import PinholeCamera, empty_layer, finish_image, rasterize, reduce
 from .scene import SHAPES, make_background, make_gripper, make_object, trajectory
 
 START_NS = 1_750_000_000 * 1_000_000_000
