@@ -42,6 +42,8 @@ from typing import Any, Generic, Protocol, TypeVar
 
 import numpy as np
 
+from .grouping import best_per_key
+
 E = TypeVar("E")
 
 
@@ -126,9 +128,9 @@ def one_to_one(a: np.ndarray, b: np.ndarray, cost: np.ndarray, rounds: int = 4) 
             break
         aa, bb, cc = a[alive], b[alive], cost[alive]
         mutual = np.zeros(len(alive), bool)
-        mutual[_cheapest(aa, cc)] = True
+        mutual[best_per_key(aa, cc)] = True
         best_b = np.zeros(len(alive), bool)
-        best_b[_cheapest(bb, cc)] = True
+        best_b[best_per_key(bb, cc)] = True
         mutual &= best_b
         chosen.append(alive[mutual])
         used_a[aa[mutual]] = True
@@ -147,13 +149,6 @@ def _sharing(model_index: np.ndarray, observed_index: np.ndarray, reach: int = 4
     i, j = (np.concatenate(x) for x in zip(*pairs))
     distinct = i != j
     return i[distinct], j[distinct]
-
-
-def _cheapest(keys: np.ndarray, cost: np.ndarray) -> np.ndarray:
-    order = np.lexsort((cost, keys))
-    first = np.ones(len(order), bool)
-    first[1:] = keys[order][1:] != keys[order][:-1]
-    return order[first]
 
 
 class Accumulator(Generic[E]):

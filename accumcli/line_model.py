@@ -246,19 +246,22 @@ def _angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.arccos(np.clip(np.sum(_unit(a) * _unit(b), axis=-1), -1.0, 1.0))
 
 
-def to_model(entities: Segments, confidence: np.ndarray, observations: np.ndarray) -> Segments:
+def to_model(entities: Segments, confidence: np.ndarray, observations: np.ndarray,
+             uncertainty: bool = True) -> Segments:
     """The model as written to files: segments with confidence and observation count, and
-    per segment its mean viewing direction, cone half-angle (degrees) and the standard deviation
-    of its position across its direction (m)."""
+    per segment its mean viewing direction, cone half-angle (degrees) and (unless
+    ``uncertainty`` is False: it inverts every segment's information, which tracking during
+    accumulation does not need) the standard deviation of its position across its direction (m)."""
     extra = entities.extra
-    covariance = np.linalg.inv(extra["info"]) if len(entities) else np.zeros((0, 3, 3))
     views = extra["views"]
     mean_view = _unit(views.sum(axis=1))
     cosines = np.where(views.any(axis=2), np.einsum("nkj,nj->nk", views, mean_view), 1.0)
     spread = np.degrees(np.arccos(np.clip(cosines.min(axis=1, initial=1.0), -1, 1)))
-    u = entities.directions
-    across = np.trace(covariance, axis1=1, axis2=2) - np.einsum("ni,nij,nj->n", u, covariance, u)
+    columns = {"view_direction": mean_view, "view_spread_deg": spread}
+    if uncertainty:
+        covariance = np.linalg.inv(extra["info"]) if len(entities) else np.zeros((0, 3, 3))
+        u = entities.directions
+        across = np.trace(covariance, axis1=1, axis2=2) - np.einsum("ni,nij,nj->n", u, covariance, u)
+        columns["sigma_m"] = np.sqrt(np.maximum(across, 0) / 2)
     return Segments(entities.frame_id, entities.centers, entities.directions, entities.lengths,
-                    np.asarray(confidence, float), np.asarray(observations, np.int64),
-                    {"view_direction": mean_view, "view_spread_deg": spread,
-                     "sigma_m": np.sqrt(np.maximum(across, 0) / 2)})
+                    np.asarray(confidence, float), np.asarray(observations, np.int64), columns)

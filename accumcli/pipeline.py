@@ -87,7 +87,7 @@ class LineAccumulation:
 
     def _refined(self, frame: StereoFrame, T_recorded: np.ndarray) -> tuple[np.ndarray, PoseEstimate | None]:
         p = self.params
-        model = to_model(self.core.entities, self.core.confidence, self.core.observations)
+        model = to_model(self.core.entities, self.core.confidence, self.core.observations, uncertainty=False)
         if model.accepted.sum() < p.min_tracking_segments:
             # bootstrap: until enough segments are accepted, refine against the tentative ones too
             # (the background among them does not follow the object and falls to the robust weights)

@@ -49,6 +49,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .grouping import best_per_key
 from .lines2d import Segments2D, sample
 from .recording import StereoIntrinsics
 from .segments import Segments
@@ -97,14 +98,6 @@ def _row_crossing(seg: Segments2D, index: np.ndarray, v: np.ndarray) -> np.ndarr
     return c[..., 0] + (v - c[..., 1]) * d[..., 0] / d[..., 1]
 
 
-def _group_best(keys: np.ndarray, score: np.ndarray) -> np.ndarray:
-    """Indices of the best-scoring element of every distinct key."""
-    order = np.lexsort((-score, keys))
-    first = np.ones(len(order), bool)
-    first[1:] = keys[order][1:] != keys[order][:-1]
-    return order[first]
-
-
 def match(left_img: np.ndarray, right_img: np.ndarray, left: Segments2D, right: Segments2D,
           intr: StereoIntrinsics, params: StereoParams) -> Matches:
     """Stereo correspondences between the local segments of a rectified pair."""
@@ -143,7 +136,7 @@ def match(left_img: np.ndarray, right_img: np.ndarray, left: Segments2D, right: 
         np.degrees(np.arccos(np.clip(cos_diff, -1, 1))) / params.max_orientation_diff_deg) ** 2
     # best local segment per (left segment, right line), then the ratio test between right lines
     n_right_lines = int(right.line_id.max()) + 1
-    best = _group_best(li * n_right_lines + right.line_id[rj], score)
+    best = best_per_key(li * n_right_lines + right.line_id[rj], -score)
     li, rj, disparity, score = li[best], rj[best], disparity[best], score[best]
     order = np.lexsort((-score, li))
     li, rj, disparity, score = li[order], rj[order], disparity[order], score[order]
@@ -157,8 +150,8 @@ def match(left_img: np.ndarray, right_img: np.ndarray, left: Segments2D, right: 
     accept = first & (score >= params.min_score) & (~has_second | (cost < params.ratio * second_cost))
     # left-right check: the right segment's best left line (over all its candidates) must be ours
     n_left_lines = int(left.line_id.max()) + 1
-    best_for_right = _group_best(rj * n_left_lines + left.line_id[li], score)
-    top = _group_best(rj[best_for_right], score[best_for_right])
+    best_for_right = best_per_key(rj * n_left_lines + left.line_id[li], -score)
+    top = best_per_key(rj[best_for_right], -score[best_for_right])
     right_choice = np.full(len(right), -1)
     right_choice[rj[best_for_right][top]] = left.line_id[li[best_for_right][top]]
     accept &= right_choice[rj] == left.line_id[li]
@@ -185,7 +178,7 @@ def _propagate(left: Segments2D, right: Segments2D, li, rj, disparity, score, ac
         return np.zeros(len(li), bool)
     stretch = stretch.ravel()
     s_acc = left.t[li[accept]]
-    a, b, _, count, _ = _fit_lines(stretch, len(stretches), s_acc, disparity[accept], np.ones(len(s_acc)))
+    a, b, _, count, _, _ = _fit_lines(stretch, len(stretches), s_acc, disparity[accept], np.ones(len(s_acc)))
     position = np.searchsorted(stretches, key)
     in_stretch = (position < len(stretches)) & (stretches[np.minimum(position, len(stretches) - 1)] == key)
     position = np.minimum(position, len(stretches) - 1)
@@ -194,7 +187,7 @@ def _propagate(left: Segments2D, right: Segments2D, li, rj, disparity, score, ac
     matched_left[li[accept]] = True
     extra = (in_stretch & (count[position] >= params.min_stretch) & ~matched_left[li] & ~accept
              & (np.abs(disparity - predicted) <= params.propagate_px) & (score >= params.propagate_score))
-    best = _group_best(li[extra], score[extra])  # one per left segment
+    best = best_per_key(li[extra], -score[extra])  # one per left segment
     out = np.zeros(len(li), bool)
     out[np.flatnonzero(extra)[best]] = True
     return out
@@ -259,7 +252,7 @@ def triangulate(left: Segments2D, right: Segments2D, m: Matches, intr: StereoInt
     weight = np.clip(m.score, 0.05, None)
     keep = np.ones(len(s), bool)
     for _ in range(2):  # fit, drop outliers, refit
-        a, b, sigma, count, spread = _fit_lines(stretch, n, s, m.disparity, weight * keep)
+        a, b, sigma, count, spread, mean_s = _fit_lines(stretch, n, s, m.disparity, weight * keep)
         residual = m.disparity - (a[stretch] + b[stretch] * s)
         fitted = (count[stretch] >= 3) & (spread[stretch] >= left.lengths[m.left])
         keep = ~fitted | (np.abs(residual) <= params.fit_outlier_px)
@@ -282,7 +275,7 @@ def triangulate(left: Segments2D, right: Segments2D, m: Matches, intr: StereoInt
     direction = direction / np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-12)
     # depth uncertainty: fit residual (or a default) through the disparity's sensitivity
     sigma_d = np.where(fitted, np.maximum(sigma[stretch], 0.05) * np.sqrt(
-        1.0 / np.maximum(count[stretch], 1) + (s - _mean_s(stretch, n, s, weight * keep)[stretch]) ** 2
+        1.0 / np.maximum(count[stretch], 1) + (s - mean_s[stretch]) ** 2
         / np.maximum(spread[stretch] ** 2 / 3, 1e-9)), params.default_disparity_sigma_px)
     depth_per_disparity = p_center[:, 2] ** 2 / (intr.fx * intr.baseline)
     sigma_depth = depth_per_disparity * sigma_d
@@ -300,7 +293,7 @@ def triangulate(left: Segments2D, right: Segments2D, m: Matches, intr: StereoInt
 
 
 def _fit_lines(group, n, s, d, w):
-    """Weighted least squares d = a + b s per group: a, b, residual sigma, count, spread of s."""
+    """Weighted least squares d = a + b s per group: a, b, residual sigma, count, spread and mean of s."""
     sw = np.bincount(group, w, n)
     safe = np.where(sw > 0, sw, 1.0)
     ms = np.bincount(group, w * s, n) / safe
@@ -317,12 +310,7 @@ def _fit_lines(group, n, s, d, w):
     hi = np.full(n, -np.inf)
     np.minimum.at(lo, group[w > 0], s[w > 0])
     np.maximum.at(hi, group[w > 0], s[w > 0])
-    return a, b, sigma, count, np.where(hi > lo, hi - lo, 0.0)
-
-
-def _mean_s(group, n, s, w):
-    sw = np.bincount(group, w, n)
-    return np.bincount(group, w * s, n) / np.where(sw > 0, sw, 1.0)
+    return a, b, sigma, count, np.where(hi > lo, hi - lo, 0.0), ms
 
 
 def _plane_intersection(left: Segments2D, right: Segments2D, m: Matches, intr: StereoIntrinsics) -> np.ndarray:

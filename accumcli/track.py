@@ -44,7 +44,7 @@ from typing import Callable
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .geometry import invert, make_transform, rotate_vectors, se3_exp, transform_points
+from .geometry import invert, make_transform, pose_error, rotate_vectors, se3_exp, transform_points
 from .lines2d import sample
 from .recording import StereoFrame, StereoIntrinsics
 from .segments import Segments
@@ -135,13 +135,10 @@ def _measure(points_cam, dirs_cam, intr: StereoIntrinsics, grads: tuple, search:
     (polarity-free, orientation within ``min_orientation_cos``), each to sub-pixel precision."""
     out = []
     steps = np.arange(-np.ceil(search), np.ceil(search) + 1)
+    projected = intr.project(points_cam)[:2], intr.project(points_cam + 0.002 * dirs_cam)[:2]
     for side, grad in enumerate(grads):
-        shift = np.array([intr.baseline * side, 0.0, 0.0])
-        p = points_cam - shift
-        q = p + 0.002 * dirs_cam
-        uv = np.column_stack([intr.fx * p[:, 0] / p[:, 2] + intr.cx, intr.fy * p[:, 1] / p[:, 2] + intr.cy])
-        uv2 = np.column_stack([intr.fx * q[:, 0] / q[:, 2] + intr.cx, intr.fy * q[:, 1] / q[:, 2] + intr.cy])
-        d = uv2 - uv
+        uv = projected[0][side]
+        d = projected[1][side] - uv
         d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
         normal = np.column_stack([-d[:, 1], d[:, 0]])
         x = uv[:, :1] + steps[None, :] * normal[:, :1]
@@ -166,9 +163,9 @@ def _residuals(P, measurements, intr: StereoIntrinsics):
     """Per image: (signed distance (S,) from each point's current projection to its nearest
     candidate edge along the normal, has-candidate mask (S,), normal (S, 2))."""
     out = []
+    projected = intr.project(P)
     for side, (uv0, normal, candidates) in enumerate(measurements):
-        p = P - np.array([intr.baseline * side, 0.0, 0.0])
-        uv = np.column_stack([intr.fx * p[:, 0] / p[:, 2] + intr.cx, intr.fy * p[:, 1] / p[:, 2] + intr.cy])
+        uv = projected[side]
         moved = np.sum((uv - uv0) * normal, axis=1)                       # along the normal since measuring
         gaps = moved[:, None] - candidates
         nearest = np.nanargmin(np.where(np.isnan(gaps), np.inf, np.abs(gaps)), axis=1)
@@ -310,8 +307,8 @@ def _insert_distinct(found: list, support: int, T: np.ndarray, keep: int) -> lis
     """Insert (support, T) into a best-first list of at most ``keep`` poses at least 10 degrees or
     2 cm apart; a pose near a listed one replaces it only if its support is higher."""
     for i, (other_support, other) in enumerate(found):
-        rotation = np.degrees(np.arccos(np.clip((np.trace(other[:3, :3].T @ T[:3, :3]) - 1) / 2, -1, 1)))
-        if rotation < 10 and np.linalg.norm(other[:3, 3] - T[:3, 3]) < 0.02:
+        rotation, translation = pose_error(T, other)
+        if rotation < 10 and translation < 0.02:
             if support <= other_support:
                 return found
             found = found[:i] + found[i + 1:]
