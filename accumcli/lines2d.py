@@ -99,18 +99,25 @@ class Segments2D:
 
 @dataclass
 class Gradients:
-    """gx, gy: (H, W) float32 grey levels per pixel; edges: (H, W) uint8 Canny mask;
-    orientation: (H, W) float32 normal angle in [0, pi) of the smoothed structure
-    tensor (steadier than a single pixel's gradient on weak edges)."""
+    """gx, gy, magnitude: (H, W) float32 grey levels per pixel; edges: (H, W) uint8 Canny
+    mask; tensor_cos, tensor_sin: (H, W) float32, the smoothed structure tensor as
+    (Jxx - Jyy, 2 Jxy), whose angle / 2 is the normal orientation (steadier than a single
+    pixel's gradient on weak edges; ``orientation_at`` evaluates it where needed).
+
+    The magnitude and angle come from numpy, which rounds exactly: OpenCV's SIMD paths
+    for them depend on how the arrays happen to be aligned in memory and can differ by
+    an ulp between runs, which made extraction differ from run to run."""
 
     gx: np.ndarray
     gy: np.ndarray
+    magnitude: np.ndarray
     edges: np.ndarray
-    orientation: np.ndarray
+    tensor_cos: np.ndarray
+    tensor_sin: np.ndarray
 
-    @property
-    def magnitude(self) -> np.ndarray:
-        return cv2.magnitude(self.gx, self.gy)
+    def orientation_at(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """Normal angle in [0, pi) of the structure tensor at pixels [rows, cols]."""
+        return np.mod(np.arctan2(self.tensor_sin[rows, cols], self.tensor_cos[rows, cols]), 2 * np.pi) / 2
 
 
 @dataclass
@@ -134,8 +141,7 @@ def gradients(image: np.ndarray, params: LineParams) -> Gradients:
     edges = cv2.Canny(dx, dy, high / 2, high, L2gradient=True)
     gx, gy = dx.astype(np.float32) / 8.0, dy.astype(np.float32) / 8.0
     jxx, jxy, jyy = (cv2.GaussianBlur(a, (0, 0), params.tensor_sigma) for a in (gx * gx, gx * gy, gy * gy))
-    orientation = cv2.phase(jxx - jyy, 2 * jxy) / 2  # angle of the dominant gradient direction, [0, pi)
-    return Gradients(gx, gy, edges, orientation)
+    return Gradients(gx, gy, np.hypot(gx, gy), edges, jxx - jyy, 2 * jxy)
 
 
 def sample(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -181,7 +187,7 @@ def edge_points(grad: Gradients) -> EdgePoints:
     offset = np.clip(offset, -0.5, 0.5)
     xy = np.column_stack([cols + offset * nx, rows + offset * ny]).astype(np.float64)
     return EdgePoints(xy, np.column_stack([gx, gy]).astype(np.float64), mag.astype(np.float64),
-                      grad.orientation[rows, cols].astype(np.float64))
+                      grad.orientation_at(rows, cols).astype(np.float64))
 
 
 def hough_assign(points: EdgePoints, shape: tuple[int, int], params: LineParams) -> np.ndarray:

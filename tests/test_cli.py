@@ -140,3 +140,18 @@ def test_a_bad_frame_is_a_warning_and_the_others_go_on(tmp_path, defect, message
     assert any(line.startswith("warning: ") and message in line for line in result.output.splitlines())
     assert len(out.read_text().splitlines()) == 4
     assert all(json.loads(line)["format"] == "accum.model/1" for line in out.read_text().splitlines())
+
+
+def test_extraction_is_deterministic_across_processes(small_recording, tmp_path):
+    """Same input, same bytes out: in separate processes (memory alignment differs between them,
+    and some of OpenCV's SIMD paths round differently with it)."""
+    import subprocess
+    import sys
+
+    outputs = []
+    for i in range(2):
+        out = tmp_path / f"frames{i}.jsonl"
+        subprocess.run([sys.executable, "-m", "accumcli.cli", "-q", "extract", small_recording, "-o", str(out)],
+                       check=True, capture_output=True)
+        outputs.append(out.read_bytes())
+    assert outputs[0] == outputs[1]
