@@ -21,7 +21,7 @@ SAMPLE=sample_data/sim_box
 BOARD=sample_data/chessboard/chessboard
 
 echo "== extract: single frames"
-for r in $SAMPLE "$O/prism"; do
+for r in $SAMPLE "$O/prism" "$O/house"; do
   run "$A" -q extract "$r.mcap" -o "$O/$(basename "$r").jsonl"
   run "$A" eval --frames "$O/$(basename "$r").jsonl" "$r.truth.json"
 done
