@@ -16,3 +16,7 @@ class FileFormatError(AccumError):
 
 class PoseUnavailable(AccumError):
     """No pose at a given time (outside the transform samples, invalid sample)."""
+
+
+class InputError(AccumError, ValueError):
+    """An argument of the wrong shape or value given to the library (or an option given to the CLI)."""

@@ -86,3 +86,15 @@ def mean_transform(Ts: np.ndarray) -> np.ndarray:
 def unit(vectors: np.ndarray) -> np.ndarray:
     """Rows of ``vectors: (N, 3)`` scaled to unit length."""
     return vectors / np.linalg.norm(vectors, axis=-1, keepdims=True)
+
+
+def check_transform(T, name: str = "T") -> np.ndarray:
+    """``T`` as a (4, 4) float64 rigid transform; raises ``InputError`` saying what is wrong."""
+    from .errors import InputError
+
+    T = np.asarray(T, dtype=float)
+    if T.shape != (4, 4):
+        raise InputError(f"{name}: expected a (4, 4) rigid transform, got shape {T.shape}")
+    if not np.isfinite(T).all():
+        raise InputError(f"{name}: expected a (4, 4) rigid transform, got non-finite values")
+    return T

@@ -97,8 +97,11 @@ def read_model(path) -> Segments:
     return segments_from_dict(_load_json(path, "model"), str(path))
 
 
-def write_ply(path, segments: Segments) -> None:
-    """Binary PLY line set: 2N vertices (float x, y, z endpoints), N edges with a float confidence."""
+def write_ply(path, segments: Segments, all_segments: bool = False) -> None:
+    """Binary PLY line set: 2N vertices (float x, y, z endpoints), N edges with a float confidence;
+    the accepted segments only unless ``all_segments``."""
+    if not all_segments:
+        segments = segments.select(segments.accepted)
     n = len(segments)
     header = (f"ply\nformat binary_little_endian 1.0\ncomment accum model, frame {segments.frame_id}\n"
               f"element vertex {2 * n}\nproperty float x\nproperty float y\nproperty float z\n"
@@ -287,3 +290,38 @@ def file_kind(path) -> str:
                 return "frames"
             return kind
     raise FileFormatError(f"{path}: not a recording, model, frames, poses or truth file of accum")
+
+
+def write_json_lines(path, rows) -> None:
+    """One strict JSON object per line (NaN and infinities as null)."""
+    with atomic_open(path) as f:
+        for row in rows:
+            f.write(dumps_strict(row) + "\n")
+
+
+def write_poses_mcap(path, track: PoseTrack, topic: str = "/accum/poses", child_frame: str | None = None) -> None:
+    """The tracked poses of ``track`` as FrameTransforms on ``topic`` (child ``child_frame``)."""
+    from .recording import RecordingWriter
+
+    child = child_frame or f"{track.child_frame_id}_tracked"
+    with RecordingWriter(path) as writer:
+        for t_ns, T, status in zip(track.times_ns, track.poses, track.status):
+            if status == "tracked":
+                writer.transform(track.parent_frame_id, child, T, int(t_ns), topic=topic)
+
+
+def _finite_or_none(value):
+    if isinstance(value, dict):
+        return {k: _finite_or_none(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite_or_none(v) for v in value]
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    return value
+
+
+def dumps_strict(doc, **kwargs) -> str:
+    """JSON text of ``doc`` with NaN and infinities as null (strict parsers reject bare NaN)."""
+    return json.dumps(_finite_or_none(doc), allow_nan=False, **kwargs)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -37,6 +37,13 @@ class AccumulateParams:
     max_correction_deg: float = 10.0
     max_correction_m: float = 0.03
 
+    def __post_init__(self):
+        # A segment is expected in a frame only where it could have been extracted there, so the line
+        # model's critical angle is always the extraction's (one setting, however the params are built).
+        critical = self.extract.stereo.critical_angle_deg
+        if self.line_model.critical_angle_deg != critical:
+            object.__setattr__(self, "line_model", replace(self.line_model, critical_angle_deg=critical))
+
 
 @dataclass
 class AccumulationStep:
@@ -54,11 +61,11 @@ class LineAccumulation:
     """The model of one object, grown frame by frame (object frame ``frame_id``).
 
     With tracked motion the model is built in the frame of the first recorded
-    pose, which carries that pose's error; every refined frame measures the
-    offset ``T_recorded^-1 T_refined`` between the recorded object frame and
-    the model's. The recorded poses are unbiased, so the mean offset is the
-    first pose's error, and ``model()`` returns the model moved by it into the
-    object frame (the gauge of the model is fixed by all frames, not one).
+    pose, which carries that pose's error; every refined frame measures
+    ``T_recorded_model = T_recorded^-1 T_refined``, the model's frame in the
+    recorded object frame. The recorded poses are unbiased, so the mean of
+    these is the first pose's error, and ``model()`` returns the model moved by
+    it into the object frame (the gauge is fixed by all frames, not one).
     """
 
     def __init__(self, params: AccumulateParams = AccumulateParams(), frame_id: str = "gripper",
@@ -68,7 +75,7 @@ class LineAccumulation:
         self.entity_type = LineSegmentType(params.line_model)
         self.core = Accumulator(self.entity_type, self.entity_type.empty(frame_id), params.rule)
         self.times = StageTimes()
-        self.offsets: list[np.ndarray] = []   # T_recorded^-1 T_used of the refined frames
+        self.T_recorded_model: list[np.ndarray] = []   # T_recorded^-1 T_refined of the refined frames
 
     def extract(self, frame: StereoFrame) -> FrameSegments:
         return extract_frame(frame, self.params.extract, self.camera_frame, self.times)
@@ -100,16 +107,16 @@ class LineAccumulation:
         rotation, translation = pose_error(estimate.T_camera_object, T_recorded)
         if estimate.status != "tracked" or rotation > p.max_correction_deg or translation > p.max_correction_m:
             return T_recorded, estimate
-        self.offsets.append(invert(T_recorded) @ estimate.T_camera_object)
+        self.T_recorded_model.append(invert(T_recorded) @ estimate.T_camera_object)
         return estimate.T_camera_object, estimate
 
     def model(self) -> Segments:
         """The current model: every live segment with its confidence and observation count (with
         tracked motion, moved into the object frame by the mean offset; see the class docstring)."""
         model = to_model(self.core.entities, self.core.confidence, self.core.observations)
-        if not self.offsets:
+        if not self.T_recorded_model:
             return model
-        G = mean_transform(np.stack(self.offsets))
-        moved = model.transformed(G, model.frame_id)
-        moved.extra = {**model.extra, "view_direction": rotate_vectors(G, model.extra["view_direction"])}
+        T_object_model = mean_transform(np.stack(self.T_recorded_model))
+        moved = model.transformed(T_object_model, model.frame_id)
+        moved.extra = {**model.extra, "view_direction": rotate_vectors(T_object_model, model.extra["view_direction"])}
         return moved

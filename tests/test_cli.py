@@ -51,16 +51,27 @@ def test_info_summary(small_recording):
 
 def test_simulate_rejects_bad_options(tmp_path):
     result = run("simulate", "-o", tmp_path / "x.mcap", "--pose-noise", "abc")
-    assert result.exit_code == 2 and "expected DEG,MM" in result.output
-    result = run("simulate", "-o", tmp_path / "missing" / "x.mcap", "--frames", "1", "--size", "64x48")
+    assert result.exit_code == 1 and "expected DEG,MM" in result.output
+    result = run("simulate", "-o", tmp_path / "missing" / "x.mcap", "--count", "1", "--size", "64x48")
     assert result.exit_code == 1 and "does not exist" in result.output
 
 
-@pytest.mark.parametrize("command", [["extract", "-o", "frames.jsonl"], ["accumulate", "-o", "model.json"]])
-def test_missing_transform_tree_is_a_whole_file_error(tmp_path, command):
+def test_accumulate_without_transforms_is_a_whole_file_error(tmp_path):
     path, _ = broken_files(tmp_path)["no tf"]
-    result = run(command[0], path, command[1], tmp_path / command[2])
+    result = run("accumulate", path, "-o", tmp_path / "model.json")
     assert result.exit_code == 1 and "missing topic /tf" in result.output.strip().splitlines()[-1]
+
+
+def test_extract_needs_no_object_pose(tmp_path):
+    """Extraction is in the camera frame: a recording without transforms extracts, without a pose field."""
+    import json
+
+    path, _ = broken_files(tmp_path)["no tf"]
+    out = tmp_path / "frames.jsonl"
+    result = run("extract", path, "-o", out)
+    assert result.exit_code == 0, result.output
+    lines = [json.loads(line) for line in out.read_text().splitlines()]
+    assert len(lines) == 5 and all("T_camera_object" not in d for d in lines)
 
 
 def test_extract_writes_one_line_per_frame(small_recording, tmp_path):
@@ -74,7 +85,7 @@ def test_extract_writes_one_line_per_frame(small_recording, tmp_path):
     assert all(d["format"] == "accum.model/1" and d["frame_id"] == "camera_left" for d in lines)
     assert all("timestamp_ns" in d and len(d["segments"]) > 20 for d in lines)
     assert "3D segments per frame" in result.output and "critical" in result.output
-    figures = run("eval", "--frames", out, small_recording.replace(".mcap", ".truth.json"), "--json")
+    figures = run("eval", out, small_recording.replace(".mcap", ".truth.json"), "--json")
     assert json.loads(figures.output)["accuracy_near_object"] > 0.8
 
 
@@ -88,6 +99,15 @@ def test_accumulate_then_eval(small_recording, tmp_path):
     assert model.exists() and ply.exists() and len(history.read_text().splitlines()) == 6
     figures = json.loads(run("eval", model, truth, "--json").output)
     assert figures["accepted"] > 20 and figures["precision"] > 0.85 and figures["background"] < 0.05
+
+
+def test_no_frame_with_a_pose_is_an_error_not_an_empty_model(tmp_path):
+    from . import helpers
+
+    path = helpers.write(tmp_path / "late_tf.mcap", n=3, tf_times=[helpers.T0 + k * helpers.PERIOD for k in (10, 11, 12)])
+    result = run("accumulate", path, "-o", tmp_path / "m.json")
+    assert result.exit_code == 1 and not (tmp_path / "m.json").exists()
+    assert "no frame in 0: has a pose of 'gripper'" in result.output.strip().splitlines()[-1]
 
 
 def test_frames_without_pose_are_skipped_with_a_warning(tmp_path):
@@ -105,14 +125,61 @@ def test_frames_without_pose_are_skipped_with_a_warning(tmp_path):
     (["--angle-threshold", "90"], "not in the range"),
     (["--detector", "canny"], "'canny' is not one of"),
     (["--depth-range", "2:1"], "expected MIN:MAX"),
-    (["-o", "nowhere/m.json"], "does not exist"),
+    (["-o", "nowhere/m.json"], "the folder nowhere does not exist"),
     (["-o", "m.txt"], "expected a .json or .ply"),
+    (["--frames", "10"], "expected START:STOP, found '10' (frame 10 alone is 10:11, the first 10 frames are 0:10)"),
+    (["--frames", "5:2"], "expected START < STOP"),
+    (["--frames", "50:60"], "frames 50:60 select no frame: the recording has 6 stereo frames (0:6)"),
 ])
 def test_accumulate_validates_options(small_recording, tmp_path, monkeypatch, args, message):
+    """Every mistake: one line, exit 1, before any output is written."""
     monkeypatch.chdir(tmp_path)
     base = ["accumulate", small_recording] + ([] if "-o" in args else ["-o", "m.json"])
     result = run(*base, *args)
-    assert result.exit_code == 2 and message in result.output
+    assert result.exit_code == 1 and message in result.output, result.output
+    assert len(result.output.strip().splitlines()) == 1 and result.output.startswith("error: ")
+    assert not (tmp_path / "m.json").exists()
+
+
+@pytest.mark.parametrize("where", ["before", "after"])
+def test_quiet_and_verbose_go_before_or_after_the_command(small_recording, tmp_path, where):
+    args = ["extract", small_recording, "-o", tmp_path / "f.jsonl", "--frames", "0:1"]
+    verbose = run("-v", *args) if where == "before" else run(*args, "-v")
+    assert verbose.exit_code == 0 and "stereo frames, 1 calibration message(s)" in verbose.output
+    quiet = run("-q", *args) if where == "before" else run(*args, "-q")
+    assert quiet.exit_code == 0 and "calibration message" not in quiet.output
+
+
+def test_eval_refuses_the_truth_of_another_object(small_recording, tmp_path):
+    import json
+
+    model = tmp_path / "m.json"
+    assert run("accumulate", small_recording, "-o", model, "--frames", "0:2").exit_code == 0
+    other = tmp_path / "other.truth.json"
+    other.write_text(json.dumps({"format": "accum.truth/1", "object_frame": "board", "camera_frame": "camera_left",
+                                 "edges": [{"a": [0, 0, 0], "b": [0.1, 0, 0]}], "poses": []}))
+    result = run("eval", model, other)
+    assert result.exit_code == 1
+    assert "the truth is of object frame 'board', the model of 'gripper'" in result.output
+
+
+def test_eval_refuses_poses_of_another_recording(small_recording, tmp_path):
+    import json
+
+    poses = tmp_path / "p.json"
+    poses.write_text(json.dumps({"format": "accum.poses/1", "parent_frame_id": "camera_left",
+                                 "child_frame_id": "gripper", "poses": [
+                                     {"timestamp_ns": 5, "translation": [0, 0, 0.5], "rotation_xyzw": [0, 0, 0, 1],
+                                      "status": "tracked"}]}))
+    result = run("eval", poses, small_recording.replace(".mcap", ".truth.json"))
+    assert result.exit_code == 1 and "is it the truth of another recording?" in result.output
+
+
+def test_eval_of_a_ply_names_the_kind(small_recording, tmp_path):
+    ply = tmp_path / "m.ply"
+    assert run("accumulate", small_recording, "-o", ply, "--frames", "0:2").exit_code == 0
+    result = run("eval", ply, small_recording.replace(".mcap", ".truth.json"))
+    assert result.exit_code == 1 and "PLY" in result.output and "Traceback" not in result.output
 
 
 def test_view_writes_rrd_and_png(small_recording, tmp_path):
@@ -121,7 +188,8 @@ def test_view_writes_rrd_and_png(small_recording, tmp_path):
     result = run("view", small_recording, model, "--rrd", tmp_path / "v.rrd", "--png", tmp_path / "v.png")
     assert result.exit_code == 0, result.output
     assert (tmp_path / "v.rrd").stat().st_size > 10000 and (tmp_path / "v.png").stat().st_size > 1000
-    assert run("view", model).exit_code == 2   # nothing to do without an output
+    nothing = run("view", model)   # nothing to do without an output
+    assert nothing.exit_code == 1 and "nothing to do: give --rrd" in nothing.output
 
 
 @pytest.mark.parametrize("defect, message", [

@@ -100,14 +100,15 @@ def test_track_command_writes_poses_json_and_mcap(noisy_pair, tmp_path):
     doc = json.loads(poses_json.read_text())
     assert doc["format"] == "accum.poses/1" and doc["child_frame_id"] == "gripper" and len(doc["poses"]) == 16
     with open(poses_mcap, "rb") as f:
-        messages = list(make_reader(f).iter_messages(topics=["/tf"]))
+        messages = list(make_reader(f).iter_messages(topics=["/accum/poses"]))
     assert len(messages) == sum(p["status"] == "tracked" for p in doc["poses"]) >= 14
+    assert messages[0][2].topic == "/accum/poses"   # beside the recording's /tf, not on it
     figures = json.loads(runner.invoke(main, ["eval", "--poses", str(poses_json),
                                               exact.replace(".mcap", ".truth.json"), "--json"]).output)
     assert figures["tracked_fraction"] >= 0.85 and figures["median_rotation_deg"] < 0.5
     assert figures["median_translation_mm"] < 2.0
     bad = runner.invoke(main, ["track", str(model), exact, "-o", str(tmp_path / "p.json"), "--init", "1,2,3"])
-    assert bad.exit_code == 2 and "x,y,z,qx,qy,qz,qw" in bad.output
+    assert bad.exit_code == 1 and "x,y,z,qx,qy,qz,qw" in bad.output
 
 
 def test_tracked_motion_repairs_noisy_gripper_poses(noisy_pair):

@@ -1,0 +1,71 @@
+"""Plain-text summaries of the library runs' results, as the command line prints them (kept
+here so that cli.py only parses, calls and prints, and so a script can print the same lines)."""
+
+from __future__ import annotations
+
+import json
+
+
+def info_lines(summary, object_frame: str, camera_frame: str) -> list[str]:
+    """``accum info``'s summary of a ``RecordingInfo``."""
+    intr = summary.intrinsics
+    seconds = ((summary.last_ns or 0) - (summary.first_ns or 0)) * 1e-9
+    lines = [f"recording    {summary.path}",
+             f"frames       {summary.stereo_frames} stereo frames over {seconds:.3f} s, "
+             f"{summary.unpaired_images} unpaired images"]
+    if intr:
+        kind = "rectified" if summary.rectified_input else f"raw ({summary.distortion_model}), rectified by accum"
+        lines += [f"images       {intr.width}x{intr.height} {summary.image_encoding}, {kind}",
+                  f"calibration  fx {intr.fx:.2f} px, fy {intr.fy:.2f} px, cx {intr.cx:.2f}, cy {intr.cy:.2f}, "
+                  f"baseline {intr.baseline * 1000:.2f} mm ({summary.calibrations} message(s))"]
+    lines.append(f"poses        {object_frame} in {camera_frame}: {summary.frames_with_pose}/{summary.stereo_frames}"
+                 " frames")
+    lines += [f"             {count} frame(s): {reason}" for reason, count in summary.pose_problems]
+    lines.append(f"tf frames    {', '.join(summary.tf_frames) or 'none'}")
+    lines.append("topics")
+    lines += [f"  {topic:<32} {schema:<28} {count if count is not None else '?':>6}"
+              for topic, schema, count in summary.topics]
+    return lines
+
+
+def info_json(summary) -> str:
+    doc = {k: v for k, v in summary.__dict__.items() if k != "intrinsics"}
+    doc["intrinsics"] = summary.intrinsics.as_dict() if summary.intrinsics else None
+    return json.dumps(doc, indent=1)
+
+
+def _times(times, frames: int) -> str:
+    return "time per frame: " + ", ".join(f"{k} {1000 * v / max(frames, 1):.1f} ms" for k, v in times.seconds.items())
+
+
+def extraction_lines(result) -> list[str]:
+    return [f"{result.frames} frames: {result.per_frame('segments'):.0f} 3D segments per frame from "
+            f"{result.per_frame('left_2d'):.0f} left 2D segments ({result.per_frame('critical'):.0f} critical, "
+            f"{result.per_frame('unmatched'):.0f} unmatched), {result.pairs_per_second:.1f} pairs/s",
+            _times(result.times, result.frames)]
+
+
+def accumulation_lines(result, motion: str = "gripper") -> list[str]:
+    skipped = sum(result.skipped.values())
+    lines = [f"{result.frames} frames accumulated" + (f", {skipped} skipped without a pose" if skipped else "")
+             + f": model of {len(result.model)} segments, {result.accepted} accepted (confidence >= 0.5)",
+             _times(result.times, result.frames)]
+    if motion == "tracked":
+        lines.append(f"tracked motion: {result.refined_frames} of {result.frames} frames used a refined pose")
+    if result.scores:
+        s = result.scores
+        lines.append(f"against the truth: precision {s['precision']:.3f}, completeness {s['completeness']:.3f}, "
+                     f"background {s['background']:.3f}")
+    return lines
+
+
+def tracking_lines(result) -> list[str]:
+    n = result.frames
+    return [f"{n} frames: {result.tracked} tracked ({result.tracked / max(n, 1):.0%}), median residual "
+            f"{result.median_residual_px:.2f} px, {result.frames_per_second:.1f} frames/s"]
+
+
+def figures_lines(figures: dict) -> list[str]:
+    """``accum eval``'s figures, one per line."""
+    return [f"{key:<28} {value:.4f}" if isinstance(value, float) else f"{key:<28} {value}"
+            for key, value in figures.items()]

@@ -1,0 +1,117 @@
+"""``accumulate_recording``: the model of the object over a recording, with the frame-by-frame
+figures, pictures and Rerun log the user asked for."""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+from ..evaluate import EdgeSamples, score_segments
+from ..lines2d import StageTimes
+from ..model_io import read_truth, write_json_lines, write_model, write_ply
+from ..outputs import OutputSet
+from ..pipeline import AccumulateParams, LineAccumulation
+from ..segments import Segments
+from .base import FrameRange, Progress, RecordingOptions, no_progress, nothing_done
+from .checks import check_truth_matches
+from .rerun_sink import rerun_log
+
+log = logging.getLogger("accumcli")
+
+
+@dataclass
+class AccumulationResult:
+    """The final model (object frame), the frames used and skipped (reason -> count), one row of
+    figures per used frame (counts; with a truth, precision / completeness / background of the
+    accepted segments so far), the final scores against the truth, per-stage times, the number of
+    frames whose refined pose was used (tracked motion), the wall time and the files written."""
+
+    model: Segments
+    frames: int = 0
+    skipped: dict = field(default_factory=dict)
+    rows: list = field(default_factory=list)
+    scores: dict | None = None
+    times: StageTimes = field(default_factory=StageTimes)
+    refined_frames: int = 0
+    seconds: float = 0.0
+    outputs: list = field(default_factory=list)
+
+    @property
+    def accepted(self) -> int:
+        return int(self.model.accepted.sum())
+
+    @property
+    def pairs_per_second(self) -> float:
+        return self.frames / max(self.seconds, 1e-9)
+
+
+def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = AccumulateParams(),
+                         options: RecordingOptions = RecordingOptions(), frames: FrameRange = FrameRange(),
+                         truth=None, history=None, rrd=None, png=None, panel=None, ply_all: bool = False,
+                         progress: Progress = no_progress) -> AccumulationResult:
+    """Accumulate the frames in ``frames`` of ``recording`` into one model.
+
+    outputs: model files, ``.json`` (accum.model/1) and/or ``.ply`` (accepted segments; all with
+    ``ply_all``); truth: a truth sidecar path, to score the model frame by frame; history: JSON lines,
+    one row per frame; rrd: a Rerun recording; png / panel: pictures of the model and of the last frame.
+    All outputs are checked before the work and written together at the end.
+    """
+    files = OutputSet([*outputs, history, rrd, png, panel])
+    edges = None
+    if truth is not None:
+        truth_doc = read_truth(truth)
+        check_truth_matches(truth_doc, options.object_frame, truth)
+        edges = EdgeSamples.of(truth_doc)
+    t0 = time.perf_counter()
+    with options.open(recording) as rec, files:
+        total = frames.check(rec)
+        acc = LineAccumulation(params, rec.object_frame, rec.camera_frame)
+        result = AccumulationResult(acc.model(), times=acc.times)
+        step, done = None, 0
+        with rerun_log(files, rrd, "accumulate") as viz:
+            for frame in rec.frames(frames.start, frames.stop):
+                done += 1
+                progress(done, total)
+                if frame.T_camera_object is None:
+                    log.warning("%s: frame %d: no pose (%s): skipped", recording, frame.index, frame.pose_problem)
+                    result.skipped[frame.pose_problem] = result.skipped.get(frame.pose_problem, 0) + 1
+                    continue
+                step = acc.step(frame, frame.T_camera_object)
+                row = {"frame_index": frame.index, "timestamp_ns": frame.timestamp_ns, **step.stats.__dict__}
+                if step.tracking is not None:
+                    row.update(tracking=step.tracking.status, residual_px=step.tracking.residual_px)
+                if edges is not None or viz:
+                    model = acc.model()
+                if edges is not None:
+                    row.update(score_segments(model.select(model.accepted), edges).as_dict())
+                    row.pop("segments")
+                if viz:
+                    viz.accumulation(step, model, row)
+                result.rows.append(row)
+        result.frames = len(result.rows)
+        if result.frames == 0:
+            raise nothing_done(recording, f"no frame in {frames} has a pose of {rec.object_frame!r} in "
+                                          f"{rec.camera_frame!r}; nothing was accumulated", result.skipped)
+        result.model = acc.model()
+        result.refined_frames = len(acc.T_recorded_model)
+        if edges is not None:
+            result.scores = score_segments(result.model.select(result.model.accepted), edges).as_dict()
+        for path in outputs:
+            if str(path).lower().endswith(".ply"):
+                write_ply(files.path(path), result.model, all_segments=ply_all)
+            else:
+                write_model(files.path(path), result.model)
+        if history:
+            write_json_lines(files.path(history), result.rows)
+        if png or panel:
+            from ..render import render_frame_panel, render_model, write_png
+
+            if png:
+                write_png(files.path(png), render_model(result.model))
+            if panel:
+                write_png(files.path(panel), render_frame_panel(step.frame, step.extraction, result.model,
+                                                                step.T_camera_object))
+    result.seconds = time.perf_counter() - t0
+    result.outputs = [str(p) for p in (*outputs, history, rrd, png, panel) if p]
+    return result

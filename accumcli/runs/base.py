@@ -1,0 +1,95 @@
+"""What every library run shares: how a recording is opened, which frames are
+used, how progress is reported, and how the run's outputs are written.
+
+A run (``extract_recording``, ``accumulate_recording``, ``track_recording``,
+``view``) does the whole job the command line asks for and returns a result
+object; cli.py only parses options, calls it and prints. Benchmarks and tests
+call the same functions.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+from dataclasses import dataclass, field
+from typing import Callable
+
+from ..errors import AccumError, InputError
+from ..recording import Recording, Topics
+
+log = logging.getLogger("accumcli")
+
+Progress = Callable[[int, "int | None"], None]
+"""``progress(done, total)``: frames done so far and the frames expected (None when unknown)."""
+
+
+def no_progress(done: int, total: int | None) -> None:
+    """The default progress callback: says nothing."""
+
+
+@dataclass(frozen=True)
+class RecordingOptions:
+    """How to read a recording: topic names, the two frames the tool needs, and the time
+    tolerance (nanoseconds) for pairing left and right images and for looking up transforms."""
+
+    topics: Topics = field(default_factory=Topics)
+    camera_frame: str = "camera_left"
+    object_frame: str = "gripper"
+    tolerance_ns: int = 1_000_000
+
+    def open(self, path, require_pose: bool = True) -> Recording:
+        """The recording at ``path``; with ``require_pose`` a transform path from the camera
+        frame to the object frame must exist (extraction needs none)."""
+        return Recording(path, topics=self.topics, camera_frame=self.camera_frame,
+                         object_frame=self.object_frame, tolerance_ns=self.tolerance_ns,
+                         require_pose=require_pose)
+
+
+_RANGE = re.compile(r"^\s*(\d*)\s*:\s*(\d*)\s*$")
+
+
+@dataclass(frozen=True)
+class FrameRange:
+    """Stereo frames ``start <= index < stop`` (0-based; ``stop`` None: to the end)."""
+
+    start: int = 0
+    stop: int | None = None
+
+    @classmethod
+    def parse(cls, text: str) -> "FrameRange":
+        """``START:STOP`` with either side empty (``10:``, ``:20``, ``:``). A bare number is refused:
+        it is ambiguous between a count and a single frame."""
+        m = _RANGE.match(str(text))
+        if not m:
+            if str(text).strip().isdigit():
+                n = int(text)
+                raise InputError(f"expected START:STOP, found {text!r} (frame {n} alone is {n}:{n + 1}, "
+                                 f"the first {n} frames are 0:{n})")
+            raise InputError(f"expected START:STOP with whole numbers, found {text!r}")
+        start = int(m.group(1)) if m.group(1) else 0
+        stop = int(m.group(2)) if m.group(2) else None
+        if stop is not None and stop <= start:
+            raise InputError(f"expected START < STOP, found {text!r}")
+        return cls(start, stop)
+
+    def __str__(self) -> str:
+        return f"{self.start}:{'' if self.stop is None else self.stop}"
+
+    def count_in(self, total: int) -> int:
+        """How many of ``total`` frames the range selects."""
+        return max(0, (total if self.stop is None else min(self.stop, total)) - self.start)
+
+    def check(self, rec: Recording) -> int:
+        """The number of frames to do in ``rec``; an empty selection is an error before any work."""
+        total = rec.frame_count_hint
+        n = self.count_in(total)
+        if n == 0 and total > 0:
+            raise AccumError(f"{rec.path}: frames {self} select no frame: the recording has {total} stereo "
+                             f"frames (0:{total})")
+        return n
+
+
+def nothing_done(path, what: str, skipped: dict[str, int] | None = None) -> AccumError:
+    """The error for a run that would produce nothing: which frames were skipped, and why."""
+    reasons = "; ".join(f"{n} frame(s): {why}" for why, n in (skipped or {}).items())
+    return AccumError(f"{path}: {what}" + (f" ({reasons})" if reasons else ""))

@@ -1,0 +1,31 @@
+"""Checks that inputs given together belong together (a truth of another recording gives
+figures of 0 that look like a result: refuse it instead)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import AccumError
+
+
+def check_truth_matches(truth, object_frame: str, truth_path) -> None:
+    """The truth must describe ``object_frame`` (a truth that names no frame is taken as given)."""
+    if truth.object_frame and object_frame and truth.object_frame != object_frame:
+        raise AccumError(f"{truth_path}: the truth is of object frame {truth.object_frame!r}, the model of "
+                         f"{object_frame!r}; give the truth of this recording (or --object-frame "
+                         f"{truth.object_frame})")
+
+
+def check_truth_times(truth, times_ns: np.ndarray, tolerance_ns: int, what, truth_path) -> None:
+    """At least one of ``times_ns`` must have a truth pose within ``tolerance_ns``."""
+    if len(times_ns) == 0 or len(truth.times_ns) == 0:
+        raise AccumError(f"{truth_path}: no poses to compare (the truth has {len(truth.times_ns)}, "
+                         f"{what} has {len(times_ns)})")
+    sorted_truth = np.sort(truth.times_ns)
+    i = np.clip(np.searchsorted(sorted_truth, times_ns), 1, len(sorted_truth) - 1) if len(sorted_truth) > 1 \
+        else np.zeros(len(times_ns), int)
+    nearest = np.minimum(np.abs(sorted_truth[i] - times_ns), np.abs(sorted_truth[i - 1] - times_ns)) \
+        if len(sorted_truth) > 1 else np.abs(sorted_truth[0] - times_ns)
+    if not (nearest <= tolerance_ns).any():
+        raise AccumError(f"{truth_path}: none of the {len(times_ns)} timestamps of {what} has a truth pose "
+                         f"(nearest {nearest.min() * 1e-9:.3f} s away): is it the truth of another recording?")

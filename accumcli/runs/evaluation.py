@@ -1,0 +1,40 @@
+"""``evaluate_file``: a model, frames file or poses file measured against a truth sidecar."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..evaluate import Tolerances, evaluate_frames, evaluate_model, pose_errors
+from ..errors import InputError
+from ..model_io import file_kind, read_frames, read_model, read_poses, read_truth
+from .base import FrameRange
+from .checks import check_truth_matches, check_truth_times
+
+TIME_TOLERANCE_NS = 1_000_000
+
+
+def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: FrameRange = FrameRange()) -> dict:
+    """Figures of ``path`` against the truth, by the kind of ``path`` (recognised by content):
+    a model (precision, completeness, background of the accepted segments), a frames file
+    (single-frame figures) or a poses file (pose errors, tracked fraction). ``frames`` selects
+    lines of a frames or poses file by position. A truth of another object frame, or one with
+    no pose at the file's timestamps, is refused."""
+    truth = read_truth(truth_path)
+    kind = file_kind(path)
+    if kind == "model":
+        model = read_model(path)
+        check_truth_matches(truth, model.frame_id, truth_path)
+        return evaluate_model(model, truth, tol)
+    if kind == "poses":
+        track = read_poses(path)
+        check_truth_matches(truth, track.child_frame_id, truth_path)
+        keep = slice(frames.start, frames.stop)
+        times = track.times_ns[keep]
+        check_truth_times(truth, times, TIME_TOLERANCE_NS, path, truth_path)
+        return pose_errors(times, track.poses[keep], track.status[keep], truth)
+    if kind == "frames":
+        rows = [(t, s) for i, (t, s, _) in enumerate(read_frames(path))
+                if i >= frames.start and (frames.stop is None or i < frames.stop)]
+        check_truth_times(truth, np.array([t for t, _ in rows], np.int64), TIME_TOLERANCE_NS, path, truth_path)
+        return evaluate_frames(rows, truth, tol)
+    raise InputError(f"{path}: expected a model, frames or poses file of accum to evaluate, got a {kind} file")

@@ -1,0 +1,68 @@
+"""``extract_recording``: local 3D segments of every stereo frame of a recording, as a frames file."""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..extract import ExtractParams, extract_frame
+from ..geometry import quat_from_transform
+from ..lines2d import StageTimes
+from ..model_io import FramesWriter
+from ..outputs import OutputSet
+from .base import FrameRange, Progress, RecordingOptions, no_progress, nothing_done
+from .rerun_sink import rerun_log
+
+
+@dataclass
+class ExtractionResult:
+    """Counts summed over the frames (``segments``, ``left_2d``, ``critical``, ``unmatched``), the
+    per-stage times (seconds, summed), the wall time and the files written."""
+
+    frames: int = 0
+    totals: dict = field(default_factory=lambda: {"segments": 0, "left_2d": 0, "critical": 0, "unmatched": 0})
+    times: StageTimes = field(default_factory=StageTimes)
+    seconds: float = 0.0
+    outputs: list = field(default_factory=list)
+
+    def per_frame(self, key: str) -> float:
+        return self.totals[key] / max(self.frames, 1)
+
+    @property
+    def pairs_per_second(self) -> float:
+        return self.frames / max(self.seconds, 1e-9)
+
+
+def extract_recording(recording, output, *, params: ExtractParams = ExtractParams(),
+                      options: RecordingOptions = RecordingOptions(), frames: FrameRange = FrameRange(),
+                      rrd=None, progress: Progress = no_progress) -> ExtractionResult:
+    """Extract every stereo frame in ``frames`` of ``recording`` into ``output`` (JSON lines, one
+    model-format object per frame in the left camera frame, with the recorded pose where there is
+    one; formats.md). ``rrd``: also a Rerun recording. Needs no object pose."""
+    outputs = OutputSet([output, rrd])
+    result = ExtractionResult(outputs=[p for p in (output, rrd) if p])
+    t0 = time.perf_counter()
+    with options.open(recording, require_pose=False) as rec, outputs:
+        total = frames.check(rec)
+        with FramesWriter(outputs.path(output)) as out, rerun_log(outputs, rrd, "extract") as viz:
+            for frame in rec.frames(frames.start, frames.stop):
+                extraction = extract_frame(frame, params, rec.camera_frame, result.times)
+                header = {"frame_index": frame.index, "counts": extraction.counts}
+                if frame.T_camera_object is not None:
+                    translation, quat = quat_from_transform(frame.T_camera_object)
+                    header["T_camera_object"] = {"translation": np.round(translation, 9).tolist(),
+                                                 "rotation_xyzw": np.round(quat, 9).tolist()}
+                out.write(extraction.segments, frame.timestamp_ns, **header)
+                if viz:
+                    viz.extraction(frame, extraction)
+                result.frames += 1
+                for key in result.totals:
+                    result.totals[key] += extraction.counts[key]
+                progress(result.frames, total)
+            if result.frames == 0:
+                raise nothing_done(recording, f"no stereo frame could be read in frames {frames}")
+    result.seconds = time.perf_counter() - t0
+    return result

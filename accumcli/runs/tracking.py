@@ -1,0 +1,106 @@
+"""``track_recording``: the object's pose in every stereo frame, from its model and the images."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import AccumError
+from ..extract import ExtractParams, extract_frame
+from ..geometry import check_transform
+from ..model_io import PoseTrack, read_model, write_poses, write_poses_mcap
+from ..outputs import OutputSet
+from ..segments import Segments
+from ..track import PoseTracker, TrackParams
+from .base import FrameRange, Progress, RecordingOptions, no_progress, nothing_done
+from .rerun_sink import rerun_log
+
+
+@dataclass
+class TrackingResult:
+    """The poses (``track``: T_camera_object per frame with status and figures), the wall time and
+    the files written."""
+
+    track: PoseTrack
+    seconds: float = 0.0
+    outputs: list = field(default_factory=list)
+
+    @property
+    def frames(self) -> int:
+        return len(self.track.times_ns)
+
+    @property
+    def tracked(self) -> int:
+        return sum(s == "tracked" for s in self.track.status)
+
+    @property
+    def median_residual_px(self) -> float:
+        values = [e["residual_px"] for e, s in zip(self.track.extra, self.track.status)
+                  if s == "tracked" and e.get("residual_px") is not None]
+        return float(np.median(values)) if values else float("nan")
+
+    @property
+    def frames_per_second(self) -> float:
+        return self.frames / max(self.seconds, 1e-9)
+
+
+def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | None = None,
+                    params: TrackParams = TrackParams(), extract_params: ExtractParams = ExtractParams(),
+                    options: RecordingOptions = RecordingOptions(), frames: FrameRange = FrameRange(),
+                    reacquire: bool = True, rrd=None, poses_topic: str = "/accum/poses",
+                    poses_child_frame: str | None = None, progress: Progress = no_progress) -> TrackingResult:
+    """Track ``model`` (a model path or ``Segments`` in the object frame) through ``recording``.
+
+    The first frame starts from ``init_pose`` (T_camera_object, (4, 4)) or else the recording's pose;
+    every later frame from the images alone. outputs: ``.json`` (accum.poses/1) and/or ``.mcap``
+    (the tracked poses as FrameTransforms on ``poses_topic``, child frame ``poses_child_frame``,
+    default ``<object>_tracked``, so they sit beside the recording's own /tf in Foxglove).
+    """
+    if not isinstance(model, Segments):
+        model_path, model = model, read_model(model)
+    else:
+        model_path = "the model"
+    if not model.accepted.any():
+        raise AccumError(f"{model_path}: the model has no accepted segment (confidence >= 0.5) to track")
+    if init_pose is not None:
+        init_pose = check_transform(init_pose, "init_pose")
+    files = OutputSet([*outputs, rrd])
+    tracker = PoseTracker(model)
+    times, poses, status, extra, trajectory = [], [], [], [], []
+    t0 = time.perf_counter()
+    with options.open(recording, require_pose=init_pose is None) as rec, files:
+        total = frames.check(rec)
+        with rerun_log(files, rrd, "track") as viz:
+            for frame in rec.frames(frames.start, frames.stop):
+                guess = None
+                if not times:
+                    guess = init_pose if init_pose is not None else frame.T_camera_object
+                    if guess is None:
+                        raise AccumError(f"{recording}: the first frame has no recorded pose "
+                                         f"({frame.pose_problem}); give one with --init")
+                observe = (lambda f=frame: extract_frame(f, extract_params, rec.camera_frame).segments) \
+                    if reacquire else None
+                estimate = tracker.update(frame, guess, observe)
+                times.append(frame.timestamp_ns)
+                poses.append(estimate.T_camera_object)
+                status.append(estimate.status)
+                extra.append({"residual_px": round(estimate.residual_px, 4) if np.isfinite(estimate.residual_px)
+                              else None, "inliers": estimate.inliers, "method": estimate.method})
+                if estimate.status == "tracked":
+                    trajectory.append(estimate.T_camera_object[:3, 3])
+                if viz:
+                    viz.tracking(frame, model, estimate, trajectory)
+                progress(len(times), total)
+        if not times:
+            raise nothing_done(recording, f"no stereo frame could be read in frames {frames}")
+        track = PoseTrack(rec.camera_frame, rec.object_frame, np.array(times, np.int64),
+                          np.array(poses).reshape(-1, 4, 4), status, extra)
+        for path in outputs:
+            if str(path).lower().endswith(".mcap"):
+                write_poses_mcap(files.path(path), track, topic=poses_topic,
+                                 child_frame=poses_child_frame or f"{rec.object_frame}_tracked")
+            else:
+                write_poses(files.path(path), track)
+    return TrackingResult(track, time.perf_counter() - t0, [str(p) for p in (*outputs, rrd) if p])

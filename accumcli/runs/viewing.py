@@ -1,0 +1,133 @@
+"""``view``: any mix of a recording, models, frames, poses and truth files, shown in Rerun or drawn
+as a picture."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import AccumError, InputError
+from ..model_io import file_kind, read_frames, read_model, read_poses, read_truth
+from ..outputs import OutputSet
+from ..segments import Segments
+from .base import FrameRange, Progress, RecordingOptions, no_progress
+
+
+@dataclass
+class ViewInputs:
+    """The inputs sorted by kind (recognised by content): at most one recording, models by name
+    (a truth's edges appear as the model ``truth``), pose tracks and frames files."""
+
+    recording: str | None = None
+    models: dict = field(default_factory=dict)
+    tracks: list = field(default_factory=list)
+    frames_files: list = field(default_factory=list)
+
+    @classmethod
+    def of(cls, paths) -> "ViewInputs":
+        inputs = cls()
+        for path in paths:
+            kind = file_kind(path)
+            if kind == "recording":
+                if inputs.recording is not None:
+                    raise InputError(f"{path}: give at most one recording (already {inputs.recording})")
+                inputs.recording = str(path)
+            elif kind == "model":
+                inputs.models[Path(path).stem.replace(".", "_")] = read_model(path)
+            elif kind == "truth":
+                truth = read_truth(path)
+                direction = truth.b - truth.a
+                length = np.linalg.norm(direction, axis=1)
+                inputs.models["truth"] = Segments(truth.object_frame, (truth.a + truth.b) / 2,
+                                                  direction / np.maximum(length, 1e-12)[:, None], length,
+                                                  np.ones(len(length)), np.ones(len(length), np.int64))
+            elif kind == "poses":
+                inputs.tracks.append(read_poses(path))
+            elif kind == "frames":
+                inputs.frames_files.append(str(path))
+            else:
+                raise InputError(f"{path}: accum view cannot show a {kind} file")
+        return inputs
+
+    def pose_at(self, t_ns: int, recorded: np.ndarray | None, tolerance_ns: int) -> np.ndarray | None:
+        """The object's pose at ``t_ns``: from the first poses file that has a finite one within the
+        tolerance, else ``recorded``."""
+        for track in self.tracks:
+            if not len(track.times_ns):
+                continue
+            i = int(np.argmin(np.abs(track.times_ns - t_ns)))
+            if abs(int(track.times_ns[i]) - t_ns) <= tolerance_ns and np.isfinite(track.poses[i]).all():
+                return track.poses[i]
+        return recorded
+
+
+def view(paths, *, rrd=None, spawn: bool = False, connect: str | None = None, png=None,
+         png_frame: int | None = None, options: RecordingOptions = RecordingOptions(),
+         frames: FrameRange = FrameRange(), progress: Progress = no_progress) -> list[str]:
+    """Show ``paths`` in Rerun (exactly one of ``rrd``, ``spawn``, ``connect``) and/or draw ``png``.
+    With a recording, world is the left camera frame and each model is placed at the object's pose
+    in every frame (a poses file's if given, else the recording's). Returns the files written."""
+    if sum(map(bool, (rrd, spawn, connect))) > 1:
+        raise InputError("choose one of --rrd, --spawn and --connect")
+    if not (rrd or spawn or connect or png):
+        raise InputError("nothing to do: give --rrd, --spawn, --connect or --png")
+    inputs = ViewInputs.of(paths)
+    files = OutputSet([rrd, png])
+    with files:
+        if rrd or spawn or connect:
+            _log_to_rerun(inputs, files.path(rrd) if rrd else None, spawn, connect, options, frames, progress)
+        if png:
+            _draw_picture(inputs, files.path(png), png_frame, options)
+    return [str(p) for p in (rrd, png) if p]
+
+
+def _log_to_rerun(inputs: ViewInputs, rrd, spawn, connect, options, frames, progress) -> None:
+    from ..visualize import RerunLog
+
+    viz = RerunLog("accum view", rrd=rrd, kind="view", spawn=spawn, connect=connect)
+    positions = []
+    if inputs.recording:
+        with options.open(inputs.recording, require_pose=False) as rec:
+            total = frames.check(rec)
+            for done, frame in enumerate(rec.frames(frames.start, frames.stop), 1):
+                T = inputs.pose_at(frame.timestamp_ns, frame.T_camera_object, options.tolerance_ns)
+                viz.recording_frame(frame, inputs.models, T)
+                if T is not None:
+                    positions.append(T[:3, 3])
+                progress(done, total)
+    else:
+        for name, model in inputs.models.items():
+            viz.model(model, np.eye(4), f"world/{name}")
+    for track in inputs.tracks:
+        ok = np.isfinite(track.poses).all(axis=(1, 2))
+        positions.extend(track.poses[ok, :3, 3])
+    if positions:
+        viz.trajectory(np.array(positions))
+    for path in inputs.frames_files:
+        for index, (t_ns, segments, doc) in enumerate(read_frames(path)):
+            viz.frame_segments(doc.get("frame_index", index), t_ns, segments)
+    viz.close()
+
+
+def _draw_picture(inputs: ViewInputs, png, png_frame, options) -> None:
+    """The model alone, or (with a recording) one frame, its extraction and the model, as in the paper."""
+    from ..extract import extract_frame
+    from ..render import render_frame_panel, render_model, write_png
+
+    named = [m for name, m in inputs.models.items() if name != "truth"] or list(inputs.models.values())
+    if not named:
+        raise InputError("a picture (--png) needs a model among the inputs")
+    if not inputs.recording:
+        write_png(png, render_model(named[0]))
+        return
+    with options.open(inputs.recording, require_pose=False) as rec:
+        wanted = png_frame if png_frame is not None else rec.frame_count_hint // 2
+        for frame in rec.frames(wanted, wanted + 1):
+            T = inputs.pose_at(frame.timestamp_ns, frame.T_camera_object, options.tolerance_ns)
+            if T is None:
+                raise AccumError(f"{inputs.recording}: frame {wanted} has no pose to place the model")
+            write_png(png, render_frame_panel(frame, extract_frame(frame), named[0], T))
+            return
+        raise AccumError(f"{inputs.recording}: no frame {wanted} (the recording has {rec.frame_count_hint})")
