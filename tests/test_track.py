@@ -102,7 +102,7 @@ def test_track_command_writes_poses_json_and_mcap(noisy_pair, tmp_path):
     with open(poses_mcap, "rb") as f:
         messages = list(make_reader(f).iter_messages(topics=["/accum/poses"]))
     assert len(messages) == sum(p["status"] == "tracked" for p in doc["poses"]) >= 14
-    assert messages[0][2].topic == "/accum/poses"   # beside the recording's /tf, not on it
+    assert messages[0][1].topic == "/accum/poses"   # beside the recording's /tf, not on it
     figures = json.loads(runner.invoke(main, ["eval", "--poses", str(poses_json),
                                               exact.replace(".mcap", ".truth.json"), "--json"]).output)
     assert figures["tracked_fraction"] >= 0.85 and figures["median_rotation_deg"] < 0.5
