@@ -55,17 +55,9 @@ def synthetic_step(n_model: int = 5000, n_new: int = 1000, repeats: int = 30) ->
 END_TO_END = """
 import time, cv2
 cv2.setNumThreads(1)
-from accumcli.recording import Recording
-from accumcli.pipeline import LineAccumulation
-t0 = time.perf_counter()
-n = 0
-with Recording({path!r}) as rec:
-    acc = LineAccumulation(frame_id=rec.object_frame)
-    for frame in rec.frames():
-        acc.step(frame, frame.T_camera_object)
-        n += 1
-    model = acc.model()
-RESULT = {{'frames': n, 'seconds': time.perf_counter() - t0, 'model': len(model)}}
+from accumcli.runs import accumulate_recording
+result = accumulate_recording({path!r})
+RESULT = {{'frames': result.frames, 'seconds': result.seconds, 'model': len(result.model)}}
 """
 
 

@@ -29,9 +29,13 @@ def recording(name: str, **options) -> str:
 
 def run_child(code: str) -> dict:
     """Run Python ``code`` in a fresh single-threaded interpreter; it prints one JSON line, returned
-    with the child's peak resident memory (MB) added."""
-    wrapper = (code + "\nimport resource, json as _j\n"
-               "print(_j.dumps({**RESULT, 'peak_rss_mb': resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))")
+    with the child's peak resident memory (MB) added.
+
+    The peak is the child's own ``VmHWM`` (/proc/self/status): ``ru_maxrss`` of a child on Linux
+    starts from the parent's peak at fork, so it reports the benchmark driver, not the run."""
+    wrapper = (code + "\nimport json as _j\n"
+               "_hwm = [l for l in open('/proc/self/status') if l.startswith('VmHWM:')][0].split()[1]\n"
+               "print(_j.dumps({**RESULT, 'peak_rss_mb': int(_hwm) / 1024}))")
     env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
     out = subprocess.run([sys.executable, "-c", wrapper], env=env, check=True, capture_output=True, text=True,
                          cwd=ROOT)

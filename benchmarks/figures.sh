@@ -15,18 +15,18 @@ sim prism_raw --shape prism --seed 1 --raw
 sim prism_tf --shape prism --seed 1 --tf-tree
 sim box_exact --seed 7
 sim box_noisy --seed 7 --pose-noise 1.5,4
-sim track_box --frames 60 --seed 5
-sim track_prism --frames 60 --seed 8 --shape prism
+sim track_box --count 60 --seed 5
+sim track_prism --count 60 --seed 8 --shape prism
 SAMPLE=sample_data/sim_box
 BOARD=sample_data/chessboard/chessboard
 
 echo "== extract: single frames"
 for r in $SAMPLE "$O/prism" "$O/house"; do
   run "$A" -q extract "$r.mcap" -o "$O/$(basename "$r").jsonl"
-  run "$A" eval --frames "$O/$(basename "$r").jsonl" "$r.truth.json"
+  run "$A" eval "$O/$(basename "$r").jsonl" "$r.truth.json"
 done
 run "$A" -q extract "$BOARD.mcap" --object-frame board -o "$O/chessboard.jsonl"
-run "$A" eval --frames "$O/chessboard.jsonl" "$BOARD.truth.json"
+run "$A" eval "$O/chessboard.jsonl" "$BOARD.truth.json"
 
 echo "== accumulate"
 for r in $SAMPLE "$O/prism" "$O/house" "$O/prism_raw" "$O/prism_tf"; do
