@@ -3,11 +3,11 @@
 from .accumulation import AccumulationResult, accumulate_recording
 from .base import FrameRange, Progress, RecordingOptions
 from .evaluation import evaluate_file
-from .information import describe_recording
 from .extraction import ExtractionResult, extract_recording
+from .information import describe_recording
 from .tracking import TrackingResult, track_recording
 from .viewing import view
 
 __all__ = ["AccumulationResult", "ExtractionResult", "FrameRange", "Progress", "RecordingOptions",
-           "TrackingResult", "accumulate_recording", "describe_recording", "evaluate_file", "extract_recording", "track_recording",
-           "view"]
+           "TrackingResult", "accumulate_recording", "describe_recording", "evaluate_file", "extract_recording",
+           "track_recording", "view"]

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..evaluate import Tolerances, evaluate_frames, evaluate_model, pose_errors
 from ..errors import InputError
+from ..evaluate import Tolerances, evaluate_frames, evaluate_model, pose_errors
 from ..model_io import file_kind, read_frames, read_model, read_poses, read_truth
 from .base import FrameRange
 from .checks import check_truth_matches, check_truth_times

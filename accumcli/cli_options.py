@@ -1,0 +1,132 @@
+"""The option groups that several ``accum`` commands share, declared once: which recording to
+read and how (``options``: a ``RecordingOptions``), which frames (``frames``: a ``FrameRange``),
+and how to extract (``extract_params``: an ``ExtractParams``). Values are parsed by the library
+(its ``InputError`` becomes a usage error of the option)."""
+
+from __future__ import annotations
+
+import functools
+
+import click
+
+
+def library_value(parse):
+    """A click callback turning the library's ``InputError`` into a usage error of this option."""
+    def callback(ctx, param, value):
+        from .errors import InputError
+
+        try:
+            return parse(value) if value is not None else None
+        except InputError as e:
+            raise click.BadParameter(str(e)) from None
+    return callback
+
+
+def _parse_frames(text):
+    from .runs import FrameRange
+
+    return FrameRange.parse(text)
+
+
+frames_option = click.option("--frames", "frames", default="0:", callback=library_value(_parse_frames),
+                             metavar="START:STOP", help="Stereo frames to use (0-based, STOP excluded; "
+                             "either side may be empty).")
+
+
+def recording_options(func):
+    """Options of every command that reads a recording, given to the run as ``options``."""
+    options = [
+        click.option("--object-frame", default="gripper", show_default=True,
+                     help="Frame of the object (the gripper) in the transform tree."),
+        click.option("--camera-frame", default="camera_left", show_default=True,
+                     help="Rectified left camera optical frame."),
+        click.option("--tolerance-ms", type=click.FloatRange(min=0.0), default=1.0, show_default=True,
+                     help="Left/right pairing and transform time tolerance."),
+        click.option("--left-topic", default="/stereo/left/image", show_default=True),
+        click.option("--right-topic", default="/stereo/right/image", show_default=True),
+        click.option("--left-calibration-topic", default="/stereo/left/calibration", show_default=True),
+        click.option("--right-calibration-topic", default="/stereo/right/calibration", show_default=True),
+        click.option("--tf-topic", default="/tf", show_default=True),
+    ]
+    for option in reversed(options):
+        func = option(func)
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        from .recording import Topics
+        from .runs import RecordingOptions
+
+        topics = Topics(left_image=kwargs.pop("left_topic"), right_image=kwargs.pop("right_topic"),
+                        left_calibration=kwargs.pop("left_calibration_topic"),
+                        right_calibration=kwargs.pop("right_calibration_topic"), tf=kwargs.pop("tf_topic"))
+        kwargs["options"] = RecordingOptions(topics, kwargs.pop("camera_frame"), kwargs.pop("object_frame"),
+                                             int(round(kwargs.pop("tolerance_ms") * 1e6)))
+        return func(*args, **kwargs)
+
+    return wrapper
+
+
+def extraction_options(func):
+    """Options of single-frame extraction (extract, accumulate and track), given as ``extract_params``."""
+    options = [
+        click.option("--detector", type=click.Choice(["hough", "lsd"]), default="hough", show_default=True,
+                     help="2D line detector: the paper's orientation-sensitive Hough transform, or OpenCV's LSD."),
+        click.option("--segment-length", type=click.FloatRange(4.0, 100.0), default=15.0, show_default=True,
+                     help="Length of a local segment, pixels."),
+        click.option("--gradient-threshold", type=click.FloatRange(0.1, 100.0), default=3.0, show_default=True,
+                     help="Edge gradient threshold, grey levels per pixel."),
+        click.option("--critical-angle", type=click.FloatRange(0.0, 45.0), default=12.0, show_default=True,
+                     help="Segments closer than this to the epipolar direction (degrees) are rejected."),
+        click.option("--depth-range", default="0.2:3.0", show_default=True, metavar="MIN:MAX",
+                     callback=library_value(lambda text: number_pair(text, ":", "MIN:MAX metres", positive=True)),
+                     help="Depths searched by stereo matching, metres."),
+    ]
+    for option in reversed(options):
+        func = option(func)
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        from .extract import ExtractParams
+        from .lines2d import LineParams
+        from .stereo import StereoParams
+
+        near, far = kwargs.pop("depth_range")
+        kwargs["extract_params"] = ExtractParams(
+            LineParams(detector=kwargs.pop("detector"), segment_length_px=kwargs.pop("segment_length"),
+                       gradient_threshold=kwargs.pop("gradient_threshold")),
+            StereoParams(min_depth_m=near, max_depth_m=far, critical_angle_deg=kwargs.pop("critical_angle")))
+        return func(*args, **kwargs)
+
+    return wrapper
+
+
+def number_pair(text: str, sep: str, form: str, positive: bool = False) -> tuple[float, float]:
+    from .errors import InputError
+
+    try:
+        a, b = (float(x) for x in text.split(sep))
+    except ValueError:
+        raise InputError(f"expected {form}, found {text!r}") from None
+    if positive and not 0 < a < b:
+        raise InputError(f"expected {form} with 0 < first < second, found {text!r}")
+    if min(a, b) < 0:
+        raise InputError(f"expected {form} with values >= 0, found {text!r}")
+    return a, b
+
+
+def parse_pose(value):
+    """``recording`` (None: the recording's pose) or x,y,z,qx,qy,qz,qw as a (4, 4) T_camera_object."""
+    import numpy as np
+
+    from .errors import InputError
+    from .geometry import transform_from_quat
+
+    if value == "recording":
+        return None
+    try:
+        numbers = [float(x) for x in value.split(",")]
+    except ValueError:
+        numbers = []
+    if len(numbers) != 7 or not np.isfinite(numbers).all() or np.linalg.norm(numbers[3:]) < 1e-9:
+        raise InputError(f"expected 'recording' or x,y,z,qx,qy,qz,qw, found {value!r}")
+    return transform_from_quat(numbers[:3], np.array(numbers[3:]) / np.linalg.norm(numbers[3:]))
