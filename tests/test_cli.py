@@ -223,3 +223,27 @@ def test_extraction_is_deterministic_across_processes(small_recording, tmp_path)
                        check=True, capture_output=True)
         outputs.append(out.read_bytes())
     assert outputs[0] == outputs[1]
+
+
+@pytest.mark.parametrize("signum, delay", [("SIGINT", 0.4), ("SIGINT", 1.5), ("SIGTERM", 0.4), ("SIGTERM", 1.5)])
+def test_an_interrupt_leaves_the_previous_output_and_no_temporary(tmp_path, signum, delay):
+    """Ctrl-C or SIGTERM, during the imports or during the work: one line, exit 130, the old model kept."""
+    import os
+    import shutil
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    accum = shutil.which("accum", path=os.path.dirname(sys.executable)) or shutil.which("accum")
+    model = tmp_path / "m.json"
+    model.write_text("previous")
+    process = subprocess.Popen([accum, "accumulate", "sample_data/sim_box.mcap", "-o", str(model)],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               cwd=os.path.dirname(os.path.dirname(__file__)))
+    time.sleep(delay)
+    process.send_signal(getattr(signal, signum))
+    out, err = process.communicate(timeout=60)
+    assert process.returncode == 130, err
+    assert err.strip().splitlines()[-1] == "error: interrupted" and "Traceback" not in err
+    assert model.read_text() == "previous" and os.listdir(tmp_path) == ["m.json"]
