@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 SAMPLE := sample_data/sim_box.mcap
 DEMO := out/demo
 
-.PHONY: demo test bench figures sample clean
+.PHONY: demo test bench figures sample suite clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -45,3 +45,7 @@ sample: $(VENV)/.installed
 
 clean:
 	rm -rf $(VENV) out .pytest_cache
+
+# The scoreboard of extraction and accumulation over simulated, independent and real recordings.
+suite: $(VENV)/.installed
+	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python benchmarks/suite.py

@@ -215,10 +215,11 @@ def simulate(output, count, size, shape, seed, raw, tf_tree, pose_noise, encodin
 @output_option(required=True, help="Frames file to write (JSON lines, one stereo frame per line).")
 @click.option("--rrd", type=click.Path(dir_okay=False),
               help="Also save a Rerun recording of each frame's images, 2D and 3D segments.")
+@click.option("--with-2d", is_flag=True, help="Also write each frame's left 2D segments (for the funnel of eval).")
 @frames_option
 @extraction_options
 @recording_options
-def extract(recording, output, rrd, frames, extract_params, options):
+def extract(recording, output, rrd, with_2d, frames, extract_params, options):
     """Extract local 3D line segments from every stereo pair.
 
     Each line of the output is a model-format object in the left camera frame
@@ -233,7 +234,7 @@ def extract(recording, output, rrd, frames, extract_params, options):
     from .runs import extract_recording
 
     result = run_with_progress("extracting", extract_recording, recording, output, params=extract_params,
-                               options=options, frames=frames, rrd=rrd)
+                               options=options, frames=frames, rrd=rrd, with_2d=with_2d)
     _report(extraction_lines(result))
     _wrote(result.outputs)
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError
+from ..funnel import funnel
 from ..evaluate import Tolerances, evaluate_frames, evaluate_model, pose_errors
 from ..model_io import file_kind, read_frames, read_model, read_poses, read_truth
 from .base import FrameRange
@@ -16,7 +17,7 @@ TIME_TOLERANCE_NS = 1_000_000
 def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: FrameRange = FrameRange()) -> dict:
     """Figures of ``path`` against the truth, by the kind of ``path`` (recognised by content):
     a model (precision, completeness, background of the accepted segments), a frames file
-    (single-frame figures) or a poses file (pose errors, tracked fraction). ``frames`` selects
+    (single-frame figures and the funnel, ``accumcli.funnel``) or a poses file (pose errors, tracked fraction). ``frames`` selects
     lines of a frames or poses file by position. A truth of another object frame, or one with
     no pose at the file's timestamps, is refused."""
     truth = read_truth(truth_path)
@@ -33,8 +34,8 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
         check_truth_times(truth, times, TIME_TOLERANCE_NS, path, truth_path)
         return pose_errors(times, track.poses[keep], track.status[keep], truth)
     if kind == "frames":
-        rows = [(t, s) for i, (t, s, _) in enumerate(read_frames(path))
+        rows = [row for i, row in enumerate(read_frames(path))
                 if i >= frames.start and (frames.stop is None or i < frames.stop)]
-        check_truth_times(truth, np.array([t for t, _ in rows], np.int64), TIME_TOLERANCE_NS, path, truth_path)
-        return evaluate_frames(rows, truth, tol)
+        check_truth_times(truth, np.array([t for t, _, _ in rows], np.int64), TIME_TOLERANCE_NS, path, truth_path)
+        return {**evaluate_frames([(t, s) for t, s, _ in rows], truth, tol), **funnel(rows, truth, truth_path, tol)}
     raise InputError(f"{path}: expected a model, frames or poses file of accum to evaluate, got a {kind} file")

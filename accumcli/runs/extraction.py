@@ -37,10 +37,13 @@ class ExtractionResult:
 
 def extract_recording(recording, output, *, params: ExtractParams = ExtractParams(),
                       options: RecordingOptions = RecordingOptions(), frames: FrameRange = FrameRange(),
-                      rrd=None, progress: Progress = no_progress) -> ExtractionResult:
+                      rrd=None, with_2d: bool = False, progress: Progress = no_progress) -> ExtractionResult:
     """Extract every stereo frame in ``frames`` of ``recording`` into ``output`` (JSON lines, one
     model-format object per frame in the left camera frame, with the recorded pose where there is
-    one; formats.md). ``rrd``: also a Rerun recording. Needs no object pose."""
+    one; formats.md), and the rectified intrinsics. ``with_2d``: each line also carries the left
+    2D segments (``segments_2d``: endpoints u0, v0, u1, v1 px, the indices of those that became 3D
+    segments, and the critical angle) for the funnel of ``accum eval``. ``rrd``: also a Rerun
+    recording. Needs no object pose."""
     outputs = OutputSet([output, rrd])
     result = ExtractionResult(outputs=[p for p in (output, rrd) if p])
     t0 = time.perf_counter()
@@ -49,7 +52,13 @@ def extract_recording(recording, output, *, params: ExtractParams = ExtractParam
         with FramesWriter(outputs.path(output)) as out, rerun_log(outputs, rrd, "extract") as viz:
             for frame in rec.frames(frames.start, frames.stop):
                 extraction = extract_frame(frame, params, rec.camera_frame, result.times)
-                header = {"frame_index": frame.index, "counts": extraction.counts}
+                header = {"frame_index": frame.index, "counts": extraction.counts,
+                          "intrinsics": frame.intrinsics.as_dict()}
+                if with_2d:
+                    header["segments_2d"] = {
+                        "left": np.round(extraction.left.endpoints().reshape(-1, 4), 2).tolist(),
+                        "matched": np.unique(extraction.left_index).astype(int).tolist(),
+                        "critical_angle_deg": params.stereo.critical_angle_deg}
                 if frame.T_camera_object is not None:
                     translation, quat = quat_from_transform(frame.T_camera_object)
                     header["T_camera_object"] = {"translation": np.round(translation, 9).tolist(),

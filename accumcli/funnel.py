@@ -1,0 +1,139 @@
+"""The single-frame funnel: where the edge length that a frame shows is lost on its way to
+correct 3D segments. Stage by stage, as fractions of the edge samples seen in the frame:
+
+1. ``detected_2d``: a left 2D segment lies on the sample's projection (within ``DETECT_PX``
+   across, inside its extent plus ``DETECT_PX``, direction within ``DETECT_DEG``);
+2. ``not_critical``: one such segment is not critical (farther than the critical angle from the
+   epipolar direction, so extraction tries to match it);
+3. ``matched``: one such non-critical segment became a 3D segment;
+4. ``correct_3d``: the frame's 3D segments cover the sample correctly (as in ``evaluate``).
+
+Which samples a frame shows: the truth's per-pose ``seen`` bits (base64 of numpy.packbits over
+the samples of all edges, in edge order) where it has them; otherwise (an approximation, said in
+the result) every sample that lies in front of the camera and inside both images and that the
+truth counts for completeness. Needs the frames file to carry the 2D segments and intrinsics
+(``accum extract --with-2d``); without them only stage 4 is given.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .evaluate import EdgeSamples, Tolerances, classify, covered_samples
+from .geometry import invert, rotate_vectors, transform_points
+from .segments import Segments
+
+DETECT_PX = 1.5      # across-distance of a 2D segment from a sample's projection, pixels
+DETECT_DEG = 10.0    # direction difference of a 2D segment from the projected edge, degrees
+STAGES = ("detected_2d", "not_critical", "matched", "correct_3d")
+
+
+def per_pose_seen(truth_path) -> dict[int, np.ndarray]:
+    """timestamp_ns -> (S,) bool samples seen in that frame, from the truth's per-pose bits (empty
+    when the truth has none)."""
+    with open(truth_path, encoding="utf-8") as f:
+        doc = json.load(f)
+    total = sum(len(e.get("seen") or []) for e in doc.get("edges", []))
+    seen = {}
+    for pose in doc.get("poses", []):
+        if isinstance(pose.get("seen"), str) and total:
+            bits = np.unpackbits(np.frombuffer(base64.b64decode(pose["seen"]), np.uint8))[:total]
+            seen[int(pose["timestamp_ns"])] = bits.astype(bool)
+    return seen
+
+
+def _project(points_cam: np.ndarray, intr: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Left and right pixel coordinates (u, v), (N, 2), of camera-frame points (N, 3)."""
+    z = points_cam[:, 2]
+    u = intr["fx"] * points_cam[:, 0] / z + intr["cx"]
+    v = intr["fy"] * points_cam[:, 1] / z + intr["cy"]
+    d = intr["fx"] * intr["baseline"] / z
+    return np.stack([u, v], 1), np.stack([u - d, v], 1)
+
+
+def approximate_seen(edges: EdgeSamples, T_camera_object: np.ndarray, intr: dict) -> np.ndarray:
+    """(S,) bool: samples counted for completeness, in front of the camera and inside both images."""
+    points = transform_points(T_camera_object, edges.points)
+    left, right = _project(points, intr)
+    inside = [(p[:, 0] >= 0) & (p[:, 0] <= intr["width"] - 1) & (p[:, 1] >= 0) & (p[:, 1] <= intr["height"] - 1)
+              for p in (left, right)]
+    return edges.counted & (points[:, 2] > 0.05) & inside[0] & inside[1]
+
+
+def detected_by(segments_2d: np.ndarray, edges: EdgeSamples, T_camera_object: np.ndarray, intr: dict,
+                samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs (sample index, 2D segment index) where a left 2D segment (rows u0, v0, u1, v1, px) lies
+    on the projection of an edge sample (indices ``samples``)."""
+    if len(segments_2d) == 0 or len(samples) == 0:
+        return np.zeros(0, int), np.zeros(0, int)
+    points = transform_points(T_camera_object, edges.points[samples])
+    tangent = rotate_vectors(T_camera_object, (edges.b - edges.a)[edges.edge[samples]])
+    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
+    uv, _ = _project(points, intr)
+    uv_ahead, _ = _project(points + 1e-3 * tangent, intr)
+    edge_dir = uv_ahead - uv
+    edge_dir /= np.maximum(np.linalg.norm(edge_dir, axis=1, keepdims=True), 1e-12)
+    a, b = segments_2d[:, :2], segments_2d[:, 2:]
+    centers, lengths = (a + b) / 2, np.linalg.norm(b - a, axis=1)
+    directions = (b - a) / np.maximum(lengths, 1e-12)[:, None]
+    radius = lengths.max() / 2 + DETECT_PX
+    pairs = cKDTree(uv).sparse_distance_matrix(cKDTree(centers), radius, output_type="ndarray")
+    s, k = pairs["i"], pairs["j"]
+    rel = uv[s] - centers[k]
+    along = np.sum(rel * directions[k], axis=1)
+    across = np.abs(rel[:, 0] * directions[k, 1] - rel[:, 1] * directions[k, 0])
+    parallel = np.abs(np.sum(edge_dir[s] * directions[k], axis=1)) >= np.cos(np.radians(DETECT_DEG))
+    hit = (across <= DETECT_PX) & (np.abs(along) <= lengths[k] / 2 + DETECT_PX) & parallel
+    return samples[s[hit]], k[hit]
+
+
+def frame_funnel(segments_camera: Segments, doc: dict, T_camera_object: np.ndarray, edges: EdgeSamples,
+                 seen: np.ndarray | None, tol: Tolerances = Tolerances()) -> dict:
+    """Counts of seen samples reaching each stage in one frame (``doc``: the frames-file line)."""
+    intr = doc.get("intrinsics")
+    if seen is None:
+        seen = approximate_seen(edges, T_camera_object, intr) if intr else edges.counted.copy()
+    seen = seen & edges.counted
+    samples = np.flatnonzero(seen)
+    counts = {"seen": int(len(samples))}
+    two_d = doc.get("segments_2d")
+    if two_d and intr:
+        left = np.asarray(two_d["left"], float).reshape(-1, 4)
+        sample_of, segment_of = detected_by(left, edges, T_camera_object, intr, samples)
+        direction = left[:, 2:] - left[:, :2]
+        angle = np.degrees(np.arctan2(np.abs(direction[:, 1]), np.abs(direction[:, 0])))
+        usable = angle >= float(two_d["critical_angle_deg"])
+        matched = np.zeros(len(left), bool)
+        matched[np.asarray(two_d["matched"], int)] = True
+        for stage, keep in (("detected_2d", np.ones(len(segment_of), bool)), ("not_critical", usable[segment_of]),
+                            ("matched", usable[segment_of] & matched[segment_of])):
+            counts[stage] = int(len(np.unique(sample_of[keep])))
+    segments = segments_camera.transformed(invert(T_camera_object), "object")
+    _, _, correct_for = classify(segments, edges, tol)
+    counts["correct_3d"] = int((covered_samples(segments, correct_for, edges, tol) & seen).sum())
+    return counts
+
+
+def funnel(frames, truth, truth_path, tol: Tolerances = Tolerances()) -> dict:
+    """The funnel over ``frames`` (iterable of (timestamp_ns, Segments in the camera frame, line doc)):
+    each stage's share of the seen samples, summed over the frames with a truth pose."""
+    edges = EdgeSamples.of(truth, tol)
+    bits = per_pose_seen(truth_path)
+    totals: dict[str, int] = {}
+    for t_ns, segments, doc in frames:
+        T = truth.pose_at(int(t_ns))
+        if T is None:
+            continue
+        seen = bits.get(int(t_ns))
+        if seen is not None and len(seen) != len(edges.points):
+            seen = None
+        for key, value in frame_funnel(segments, doc, T, edges, seen, tol).items():
+            totals[key] = totals.get(key, 0) + value
+    n = max(totals.get("seen", 0), 1)
+    result = {f"funnel_{stage}": totals[stage] / n for stage in STAGES if stage in totals}
+    result["funnel_seen_from"] = "truth per-frame bits" if bits else "projection (no occlusion)"
+    return result

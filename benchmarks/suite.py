@@ -1,0 +1,146 @@
+"""``make suite``: the scoreboard that judges every change of extraction and accumulation.
+
+Per recording: the single-frame funnel (``accum eval`` of ``accum extract --with-2d``: the share of
+the seen edge length detected in 2D, not critical, matched, correct in 3D), the single-frame
+near-object precision, the accumulated model's precision / completeness / background, and the
+accumulation's stereo pairs per second; then the median and the worst row of every column.
+
+The set: simulated recordings with fixed seeds (the simulator's random scenes where it has them),
+the real chessboard (sample_data/), and every recording of ../shared/data/devset (but the tracking
+one) and ../shared/data/teabox when those folders exist. The table is printed and written to
+docs/suite.md (``--no-save`` to skip that). ``--only NAME`` runs the rows whose name contains NAME.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from common import CACHE, ROOT, recording  # noqa: E402
+
+SHARED = ROOT.parent / "shared" / "data"
+SIMULATED = 12
+COLUMNS = [("2d", "funnel_detected_2d", "high"), ("not crit", "funnel_not_critical", "high"),
+           ("matched", "funnel_matched", "high"), ("3d ok", "funnel_correct_3d", "high"),
+           ("near prec", "accuracy_near_object", "high"), ("precision", "precision", "high"),
+           ("complete", "completeness", "high"), ("backgr", "background", "low"), ("pairs/s", "pairs_per_second", "high")]
+
+
+@dataclasses.dataclass
+class Row:
+    name: str
+    path: str
+    truth: str
+    object_frame: str = "gripper"
+    source: str = "simulated"
+
+
+def simulated_rows() -> list[Row]:
+    from accumcli.simulation import SimulationOptions
+
+    fields = {f.name for f in dataclasses.fields(SimulationOptions)}
+    rows = []
+    for i in range(SIMULATED):
+        seed = 100 + i
+        if "scene" in fields:
+            options = dict(frames=24, seed=seed, scene="random", clutter=(i % 4 == 3))
+        else:
+            options = dict(frames=24, seed=seed, shape=("box", "prism", "house")[i % 3])
+        path = recording(f"suite_{seed}", **options)
+        rows.append(Row(f"sim_{seed}", path, path.replace(".mcap", ".truth.json")))
+    return rows
+
+
+def real_and_independent_rows() -> list[Row]:
+    board = ROOT / "sample_data" / "chessboard" / "chessboard"
+    rows = [Row("chessboard", f"{board}.mcap", f"{board}.truth.json", "board", "real")]
+    devset = SHARED / "devset"
+    if devset.is_dir():
+        for path in sorted(devset.glob("dev_*.mcap")):
+            if "track" not in path.stem:
+                rows.append(Row(path.stem, str(path), str(path.with_suffix("")) + ".truth.json", source="devset"))
+    teabox = SHARED / "teabox" / "teabox.mcap"
+    if teabox.exists():
+        rows.append(Row("teabox", str(teabox), str(teabox.with_suffix("")) + ".truth.json", "teabox", "real"))
+    return rows
+
+
+def score(row: Row) -> dict:
+    """Extract (with 2D segments), evaluate the frames; accumulate, evaluate the model."""
+    from accumcli.runs import RecordingOptions, accumulate_recording, evaluate_file, extract_recording
+
+    options = RecordingOptions(object_frame=row.object_frame)
+    out = CACHE / "suite"
+    out.mkdir(parents=True, exist_ok=True)
+    frames_file, model_file = out / f"{row.name}.frames.jsonl", out / f"{row.name}.model.json"
+    extract_recording(row.path, str(frames_file), options=options, with_2d=True)
+    figures = evaluate_file(str(frames_file), row.truth)
+    result = accumulate_recording(row.path, [str(model_file)], options=options)
+    figures.update(evaluate_file(str(model_file), row.truth))
+    figures["pairs_per_second"] = result.pairs_per_second
+    return figures
+
+
+def _cell(value) -> str:
+    return f"{value:.3f}" if isinstance(value, float) and value == value else ("-" if value is None else str(value))
+
+
+def table(results: dict[str, dict], rows: list[Row]) -> list[str]:
+    head = "| recording | source | " + " | ".join(c[0] for c in COLUMNS) + " |"
+    lines = [head, "|" + "---|" * (len(COLUMNS) + 2)]
+    for row in rows:
+        r = results[row.name]
+        if "error" in r:
+            lines.append(f"| {row.name} | {row.source} | error: {r['error']} |")
+            continue
+        lines.append(f"| {row.name} | {row.source} | " + " | ".join(_cell(r.get(key)) for _, key, _ in COLUMNS) + " |")
+    good = [r for r in results.values() if "error" not in r]
+    for label, pick in (("median", statistics.median), ("worst", None)):
+        cells = []
+        for _, key, better in COLUMNS:
+            values = [r[key] for r in good if isinstance(r.get(key), float) and r[key] == r[key]]
+            if not values:
+                cells.append("-")
+                continue
+            value = pick(values) if pick else (min(values) if better == "high" else max(values))
+            cells.append(_cell(float(value)))
+        lines.append(f"| **{label}** | | " + " | ".join(cells) + " |")
+    return lines
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--only", help="run only the rows whose name contains this")
+    parser.add_argument("--no-save", action="store_true", help="do not write docs/suite.md")
+    args = parser.parse_args(argv)
+    rows = simulated_rows() + real_and_independent_rows()
+    if args.only:
+        rows = [r for r in rows if args.only in r.name]
+    results, t0 = {}, time.perf_counter()
+    for row in rows:
+        start = time.perf_counter()
+        try:
+            results[row.name] = score(row)
+        except Exception as e:  # a row's failure is reported in its row, the others go on
+            results[row.name] = {"error": f"{type(e).__name__}: {e}"}
+        print(f"  {row.name}: {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
+    lines = table(results, rows)
+    print("\n".join(lines))
+    print(f"\n{len(rows)} recordings in {time.perf_counter() - t0:.0f} s")
+    if not args.no_save and not args.only:
+        doc = ROOT / "docs" / "suite.md"
+        doc.write_text("# The scoreboard (`make suite`)\n\n" + __doc__.split("\n\n")[1].replace("\n", " ")
+                       + f"\n\nLast run: {time.strftime('%Y-%m-%d')}, {os.cpu_count()} cores.\n\n"
+                       + "\n".join(lines) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

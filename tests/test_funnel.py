@@ -1,0 +1,47 @@
+"""The single-frame funnel (accumcli.funnel): stages judged against a hand-made truth."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from accumcli.evaluate import EdgeSamples
+from accumcli.funnel import detected_by, frame_funnel
+from accumcli.model_io import Truth
+from accumcli.segments import Segments
+
+INTR = {"fx": 500.0, "fy": 500.0, "cx": 320.0, "cy": 240.0, "baseline": 0.1, "width": 640, "height": 480}
+
+
+def _edges(a, b, k=50) -> EdgeSamples:
+    truth = Truth("gripper", "camera_left", np.array([a], float), np.array([b], float), [""],
+                  [np.full(k, 5)], np.array([True]), np.zeros(0, np.int64), np.zeros((0, 4, 4)), {})
+    return EdgeSamples.of(truth)
+
+
+def test_a_segment_on_the_projection_detects_its_samples_and_one_beside_it_does_not():
+    # a vertical edge at x = 0, z = 1 m, y from -0.05 to 0.05 m: u = 320, v from 215 to 265
+    edges = _edges([0, -0.05, 0], [0, 0.05, 0])
+    T = np.eye(4)
+    T[2, 3] = 1.0
+    samples = np.arange(len(edges.points))
+    on = np.array([[320.4, 215.0, 320.4, 240.0]])        # covers the upper half, 0.4 px off
+    hit, _ = detected_by(on, edges, T, INTR, samples)
+    assert 0.45 <= len(np.unique(hit)) / len(samples) <= 0.56
+    beside = np.array([[322.5, 215.0, 322.5, 265.0]])    # 2.5 px away: not this edge
+    assert len(detected_by(beside, edges, T, INTR, samples)[0]) == 0
+    across = np.array([[300.0, 240.0, 340.0, 240.0]])    # through it, but perpendicular
+    assert len(detected_by(across, edges, T, INTR, samples)[0]) == 0
+
+
+def test_stages_follow_critical_and_matched_flags():
+    edges = _edges([-0.05, 0, 0], [0.05, 0, 0])          # a horizontal edge: its 2D segment is critical
+    T = np.eye(4)
+    T[2, 3] = 1.0
+    doc = {"intrinsics": INTR, "segments_2d": {"left": [[295.0, 240.0, 345.0, 240.0]], "matched": [0],
+                                               "critical_angle_deg": 12.0}}
+    counts = frame_funnel(Segments.empty("camera_left"), doc, T, edges, None)
+    assert counts["seen"] == 50 and counts["detected_2d"] == 50
+    assert counts["not_critical"] == 0 and counts["matched"] == 0 and counts["correct_3d"] == 0
+    doc["segments_2d"]["critical_angle_deg"] = 0.0
+    counts = frame_funnel(Segments.empty("camera_left"), doc, T, edges, None)
+    assert counts["not_critical"] == 50 and counts["matched"] == 50
