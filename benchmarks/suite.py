@@ -30,7 +30,8 @@ SIMULATED = 12
 COLUMNS = [("2d", "funnel_detected_2d", "high"), ("not crit", "funnel_not_critical", "high"),
            ("matched", "funnel_matched", "high"), ("3d ok", "funnel_correct_3d", "high"),
            ("near prec", "accuracy_near_object", "high"), ("precision", "precision", "high"),
-           ("complete", "completeness", "high"), ("backgr", "background", "low"), ("pairs/s", "pairs_per_second", "high")]
+           ("complete", "completeness", "high"), ("backgr", "background", "low"),
+           ("pairs/s", "pairs_per_second", "high")]
 
 
 @dataclasses.dataclass

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError
-from ..funnel import funnel
 from ..evaluate import Tolerances, evaluate_frames, evaluate_model, pose_errors
+from ..funnel import funnel
 from ..model_io import file_kind, read_frames, read_model, read_poses, read_truth
 from .base import FrameRange
 from .checks import check_truth_matches, check_truth_times
@@ -36,6 +36,7 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
     if kind == "frames":
         rows = [row for i, row in enumerate(read_frames(path))
                 if i >= frames.start and (frames.stop is None or i < frames.stop)]
-        check_truth_times(truth, np.array([t for t, _, _ in rows], np.int64), TIME_TOLERANCE_NS, path, truth_path)
+        times = np.array([t for t, _, _ in rows], np.int64)
+        check_truth_times(truth, times, TIME_TOLERANCE_NS, path, truth_path)
         return {**evaluate_frames([(t, s) for t, s, _ in rows], truth, tol), **funnel(rows, truth, truth_path, tol)}
     raise InputError(f"{path}: expected a model, frames or poses file of accum to evaluate, got a {kind} file")
