@@ -383,8 +383,11 @@ def view(inputs, rrd, spawn, connect, png, png_frame, frames, options):
               help="Segments farther than this from every truth edge are background, millimetres.")
 @click.option("--min-seen", type=click.IntRange(1, 1000), default=3, show_default=True,
               help="Completeness counts edge samples seen in at least this many frames.")
+@click.option("--support-face", type=click.IntRange(min=0), metavar="N",
+              help="With a truth that has faces: segments on face N's plane near the object (the board it stands "
+                   "on) count as on the body.")
 @frames_option
-def eval_(inputs, poses, as_json, position_tol, angle_tol, background_dist, min_seen, frames):
+def eval_(inputs, poses, as_json, position_tol, angle_tol, background_dist, min_seen, support_face, frames):
     """Measure a model, frames file or poses file against a truth sidecar.
 
     The kind of INPUT is recognised by its content.
@@ -407,7 +410,7 @@ def eval_(inputs, poses, as_json, position_tol, angle_tol, background_dist, min_
     if len(inputs) != 2:
         raise click.UsageError("expected INPUT TRUTH.json (INPUT: a model, frames or poses file)")
     tol = Tolerances(position_tol / 1000.0, angle_tol, background_dist / 1000.0, min_seen)
-    figures = evaluate_file(inputs[0], inputs[1], tol, frames)
+    figures = evaluate_file(inputs[0], inputs[1], tol, frames, support_face)
     click.echo(dumps_strict(figures, indent=1) if as_json else "\n".join(figures_lines(figures)))
 
 

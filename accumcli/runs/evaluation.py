@@ -7,6 +7,7 @@ import numpy as np
 from ..errors import InputError
 from ..evaluate import Tolerances, evaluate_frames, evaluate_model, pose_errors
 from ..funnel import funnel
+from ..surface import faces_of, surface_scores
 from ..model_io import file_kind, read_frames, read_model, read_poses, read_truth
 from .base import FrameRange
 from .checks import check_truth_matches, check_truth_times
@@ -14,18 +15,28 @@ from .checks import check_truth_matches, check_truth_times
 TIME_TOLERANCE_NS = 1_000_000
 
 
-def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: FrameRange = FrameRange()) -> dict:
+def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: FrameRange = FrameRange(),
+                  support_face: int | None = None) -> dict:
     """Figures of ``path`` against the truth, by the kind of ``path`` (recognised by content):
     a model (precision, completeness, background of the accepted segments), a frames file
     (single-frame figures and the funnel, ``accumcli.funnel``) or a poses file (pose errors, tracked fraction). ``frames`` selects
     lines of a frames or poses file by position. A truth of another object frame, or one with
-    no pose at the file's timestamps, is refused."""
+    no pose at the file's timestamps, is refused. A truth with ``faces`` also gives a model's
+    precision judged by surface (``accumcli.surface``; ``support_face``: the face it stands on)."""
     truth = read_truth(truth_path)
     kind = file_kind(path)
     if kind == "model":
         model = read_model(path)
         check_truth_matches(truth, model.frame_id, truth_path)
-        return evaluate_model(model, truth, tol)
+        figures = evaluate_model(model, truth, tol)
+        faces = faces_of(truth.meta)
+        if faces:
+            if support_face is not None and not 0 <= support_face < len(faces):
+                raise InputError(f"{truth_path}: no face {support_face} (the truth has {len(faces)} faces)")
+            figures.update(surface_scores(model, faces, tol, support_face))
+        elif support_face is not None:
+            raise InputError(f"{truth_path}: the truth has no faces, so no support face {support_face}")
+        return figures
     if kind == "poses":
         track = read_poses(path)
         check_truth_matches(truth, track.child_frame_id, truth_path)

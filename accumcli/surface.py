@@ -1,0 +1,82 @@
+"""Precision judged by surface, for objects that carry lines of their own (print, texture) that no
+list of edges holds, as a user with a CAD model of the object would judge a model.
+
+A segment is on the object when its centre lies within ``tol.position_tol`` of one of the truth's
+``faces`` (inside the face polygon, grown by the same margin) and its direction lies in that face's
+plane within ``tol.angle_tol_deg``. With a ``support_face`` (the face the object stands on, e.g. a
+box on a board that moves with it), a segment in that face's plane within ``support_radius`` of
+the object also counts as on the moving body. Everything else is background.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .evaluate import Tolerances
+from .segments import Segments
+
+
+@dataclass(frozen=True)
+class Face:
+    """A planar convex face: vertices (K, 3) metres in the object frame, outward unit normal (3,)."""
+
+    vertices: np.ndarray
+    normal: np.ndarray
+
+
+def faces_of(doc: dict) -> list[Face]:
+    """The ``faces`` of a truth document (vertex lists and outward normals); [] when it has none."""
+    faces = []
+    for face in doc.get("faces", []) or []:
+        vertices = np.asarray(face["vertices"], float).reshape(-1, 3)
+        normal = np.asarray(face["normal"], float)
+        faces.append(Face(vertices, normal / np.linalg.norm(normal)))
+    return faces
+
+
+def _in_plane(segments: Segments, face: Face, tol: Tolerances) -> np.ndarray:
+    """(N,) bool: centre within the distance of the face's plane and direction within the angle of it."""
+    distance = np.abs((segments.centers - face.vertices[0]) @ face.normal)
+    out_of_plane = np.abs(segments.directions @ face.normal)
+    return (distance <= tol.position_tol) & (out_of_plane <= np.sin(np.radians(tol.angle_tol_deg)))
+
+
+def _inside(points: np.ndarray, face: Face, margin: float) -> np.ndarray:
+    """(N,) bool: points (projected on the plane) inside the convex polygon grown by ``margin``."""
+    ring = face.vertices
+    centroid = ring.mean(axis=0)
+    inside = np.ones(len(points), bool)
+    for a, b in zip(ring, np.roll(ring, -1, axis=0)):
+        outward = np.cross(b - a, face.normal)
+        outward /= np.linalg.norm(outward)
+        if (centroid - a) @ outward > 0:      # vertices listed the other way round
+            outward = -outward
+        inside &= (points - a) @ outward <= margin
+    return inside
+
+
+def on_body(segments: Segments, faces: list[Face], tol: Tolerances = Tolerances(), support_face: int | None = None,
+            support_radius: float = 0.3) -> np.ndarray:
+    """(N,) bool: segments (object frame) on a face, or on the support face's plane near the object."""
+    result = np.zeros(len(segments), bool)
+    for face in faces:
+        result |= _in_plane(segments, face, tol) & _inside(segments.centers, face, tol.position_tol)
+    if support_face is not None:
+        face = faces[support_face]
+        centre = np.concatenate([f.vertices for f in faces]).mean(axis=0)
+        near = np.linalg.norm(segments.centers - centre, axis=1) <= support_radius
+        result |= _in_plane(segments, face, tol) & near
+    return result
+
+
+def surface_scores(model: Segments, faces: list[Face], tol: Tolerances = Tolerances(),
+                   support_face: int | None = None) -> dict:
+    """Of the accepted segments: the share on the body (``surface_precision``) and the rest
+    (``surface_background``)."""
+    accepted = model.select(model.accepted)
+    if len(accepted) == 0:
+        return {"surface_precision": float("nan"), "surface_background": float("nan")}
+    share = float(on_body(accepted, faces, tol, support_face).mean())
+    return {"surface_precision": share, "surface_background": 1.0 - share}
