@@ -7,8 +7,8 @@ import numpy as np
 from ..errors import InputError
 from ..evaluate import Tolerances, evaluate_frames, evaluate_model, pose_errors
 from ..funnel import funnel
-from ..surface import faces_of, surface_scores
 from ..model_io import file_kind, read_frames, read_model, read_poses, read_truth
+from ..surface import faces_of, surface_scores
 from .base import FrameRange
 from .checks import check_truth_matches, check_truth_times
 
@@ -19,8 +19,8 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
                   support_face: int | None = None) -> dict:
     """Figures of ``path`` against the truth, by the kind of ``path`` (recognised by content):
     a model (precision, completeness, background of the accepted segments), a frames file
-    (single-frame figures and the funnel, ``accumcli.funnel``) or a poses file (pose errors, tracked fraction). ``frames`` selects
-    lines of a frames or poses file by position. A truth of another object frame, or one with
+    (single-frame figures and the funnel, ``accumcli.funnel``) or a poses file (pose errors,
+    tracked fraction). ``frames`` selects lines of a frames or poses file by position. A truth of another object frame, or one with
     no pose at the file's timestamps, is refused. A truth with ``faces`` also gives a model's
     precision judged by surface (``accumcli.surface``; ``support_face``: the face it stands on)."""
     truth = read_truth(truth_path)
