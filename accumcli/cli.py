@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import os
 import sys
 
 import click
@@ -367,6 +368,41 @@ def view(inputs, rrd, spawn, connect, png, png_frame, frames, options):
                                 png_frame=png_frame, options=options, frames=frames)
     if written:
         _wrote(written)
+
+
+# -- batch -----------------------------------------------------------------------------------------
+@command()
+@click.argument("recordings", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@output_option("outdir", required=True, type=click.Path(file_okay=False), help="Folder of the results.")
+@click.option("--track", is_flag=True, help="Also track each model through its recording (poses.json).")
+@click.option("--truth-from-sidecar", is_flag=True, help="Evaluate each model against NAME.truth.json beside it.")
+@click.option("--workers", type=click.IntRange(min=1), default=min(2, os.cpu_count() or 1), show_default=True,
+              help="Recordings processed at once on this machine.")
+@click.option("--ray", "ray_address", metavar="ADDRESS", help="Run the tasks on a Ray cluster (ray.init(address)); "
+              "'local' starts Ray's local cluster. Needs pip install 'accumcli[ray]'.")
+@frames_option
+@extraction_options
+@recording_options
+def batch(recordings, outdir, track, truth_from_sidecar, workers, ray_address, frames, extract_params, options):
+    """Accumulate (and optionally track and evaluate) many recordings: OUTDIR/NAME/ each, summary.csv.
+
+    A recording that fails is reported in its row; the others go on. Re-running
+    skips the recordings whose outputs are complete for the same inputs and options.
+
+    \b
+    Example:
+      accum batch recordings/*.mcap -o out/batch --truth-from-sidecar --workers 2
+    """
+    from .batch import BatchOptions, run_batch, table_lines
+    from .pipeline import AccumulateParams
+
+    batch_options = BatchOptions(AccumulateParams(extract=extract_params), options, frames, track, truth_from_sidecar)
+    result = run_with_progress("recordings", run_batch, recordings, outdir, batch_options, workers=workers,
+                               ray_address=ray_address)
+    _report(table_lines(result.rows))
+    click.echo(f"{len(result.rows)} recordings in {result.seconds:.1f} s, {result.failed} failed; wrote {result.summary}")
+    if result.failed == len(result.rows):
+        raise AccumError("every recording failed (see the status column)")
 
 
 # -- eval ------------------------------------------------------------------------------------------

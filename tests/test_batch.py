@@ -1,0 +1,60 @@
+"""accum batch: many recordings, one row each, failures in their rows, re-runs skip, Ray."""
+
+from __future__ import annotations
+
+import shutil
+
+import pytest
+from click.testing import CliRunner
+
+from accumcli.batch import BatchOptions, run_batch
+from accumcli.cli import main
+from accumcli.runs import FrameRange
+
+
+@pytest.fixture(scope="module")
+def recordings(tmp_path_factory, small_recording):
+    """Two copies of the small recording (with truth) and a broken file."""
+    folder = tmp_path_factory.mktemp("batch_in")
+    paths = []
+    for name in ("a", "b"):
+        shutil.copy(small_recording, folder / f"{name}.mcap")
+        shutil.copy(small_recording.replace(".mcap", ".truth.json"), folder / f"{name}.truth.json")
+        paths.append(str(folder / f"{name}.mcap"))
+    (folder / "broken.mcap").write_bytes(b"\x89MCAP0\r\nnot really")
+    return paths + [str(folder / "broken.mcap")]
+
+
+OPTIONS = BatchOptions(frames=FrameRange(0, 3), truth_from_sidecar=True)
+
+
+def test_one_row_per_recording_and_failures_stay_in_their_row(recordings, tmp_path):
+    result = run_batch(recordings, tmp_path, OPTIONS, workers=2)
+    assert [r["status"] for r in result.rows][:2] == ["ok", "ok"]
+    assert result.rows[2]["status"].startswith("error: ") and "broken.mcap" in result.rows[2]["status"]
+    assert result.rows[0]["frames"] == 3 and result.rows[0]["precision"] > 0.8
+    for name in ("a", "b"):
+        assert {p.name for p in (tmp_path / name).iterdir()} >= {"model.json", "model.ply", "eval.json", "done.json"}
+    lines = (tmp_path / "summary.csv").read_text().splitlines()
+    assert lines[0].startswith("recording,frames,segments,accepted,precision") and len(lines) == 4
+    again = run_batch(recordings, tmp_path, OPTIONS, workers=1)
+    assert [r.get("skipped", False) for r in again.rows] == [True, True, False]
+    assert (tmp_path / "summary.csv").read_text().splitlines() == lines
+
+
+def test_one_and_two_workers_and_ray_give_the_same_summary(recordings, tmp_path):
+    pytest.importorskip("ray")
+    summaries = []
+    for name, kwargs in (("one", dict(workers=1)), ("two", dict(workers=2)), ("ray", dict(ray_address="local"))):
+        run_batch(recordings[:2], tmp_path / name, OPTIONS, **kwargs)
+        summaries.append((tmp_path / name / "summary.csv").read_text())
+    assert summaries[0] == summaries[1] == summaries[2]
+
+
+def test_batch_command_prints_the_table_and_exits_1_when_all_fail(recordings, tmp_path):
+    runner = CliRunner()
+    ok = runner.invoke(main, ["batch", *recordings, "-o", str(tmp_path / "o"), "--frames", "0:2", "--workers", "1"])
+    assert ok.exit_code == 0, ok.output
+    assert "recording" in ok.output.splitlines()[0] and "1 failed" in ok.output
+    bad = runner.invoke(main, ["batch", recordings[2], "-o", str(tmp_path / "p")])
+    assert bad.exit_code == 1 and "every recording failed" in bad.output
