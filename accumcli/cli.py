@@ -400,7 +400,8 @@ def batch(recordings, outdir, track, truth_from_sidecar, workers, ray_address, f
     result = run_with_progress("recordings", run_batch, recordings, outdir, batch_options, workers=workers,
                                ray_address=ray_address)
     _report(table_lines(result.rows))
-    click.echo(f"{len(result.rows)} recordings in {result.seconds:.1f} s, {result.failed} failed; wrote {result.summary}")
+    click.echo(f"{len(result.rows)} recordings in {result.seconds:.1f} s, {result.failed} failed; "
+               f"wrote {result.summary}")
     if result.failed == len(result.rows):
         raise AccumError("every recording failed (see the status column)")
 
