@@ -298,7 +298,8 @@ def accumulate(recording, outputs, ply_all, rrd, truth, history, png, panel, mot
 @click.argument("model_file", metavar="MODEL.json", type=click.Path(dir_okay=False, exists=True))
 @path_arg("recording")
 @output_option("outputs", multiple=True, required=True,
-               help="Poses to write: .json (accum.poses/1) and/or .mcap (FrameTransforms for Foxglove); repeatable.")
+               help="Poses to write: .json (accum.poses/1), .tum (for evo) and/or .mcap (FrameTransforms for "
+                    "Foxglove); repeatable.")
 @click.option("--init", "init_pose", default="recording", show_default=True, callback=library_value(parse_pose),
               metavar="recording|x,y,z,qx,qy,qz,qw",
               help="Pose of the first frame: the recording's, or given (metres, quaternion).")
@@ -321,14 +322,14 @@ def track(model_file, recording, outputs, init_pose, rrd, reacquire, poses_topic
 
     \b
     Example:
-      accum track out/model.json sample_data/sim_box.mcap -o out/poses.json -o out/poses.mcap
+      accum track out/model.json sample_data/sim_box.mcap -o out/poses.json -o out/poses.tum -o out/poses.mcap
     """
     from .report import tracking_lines
     from .runs import track_recording
 
     for path in outputs:
-        if not path.lower().endswith((".json", ".mcap")):
-            raise click.BadParameter(f"expected a .json or .mcap file, found {path!r}", param_hint="--output")
+        if not path.lower().endswith((".json", ".tum", ".mcap")):
+            raise click.BadParameter(f"expected a .json, .tum or .mcap file, found {path!r}", param_hint="--output")
     result = run_with_progress("tracking", track_recording, model_file, recording, outputs, init_pose=init_pose,
                                extract_params=extract_params, options=options, frames=frames,
                                reacquire=reacquire, rrd=rrd, poses_topic=poses_topic,

@@ -14,6 +14,7 @@ from ..model_io import PoseTrack, read_model, write_poses, write_poses_mcap
 from ..outputs import OutputSet
 from ..segments import Segments
 from ..track import PoseTracker, TrackParams
+from ..tum import write_poses_tum
 from .base import FrameRange, Progress, RecordingOptions, no_progress, nothing_done
 from .rerun_sink import rerun_log
 
@@ -54,9 +55,10 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
     """Track ``model`` (a model path or ``Segments`` in the object frame) through ``recording``.
 
     The first frame starts from ``init_pose`` (T_camera_object, (4, 4)) or else the recording's pose;
-    every later frame from the images alone. outputs: ``.json`` (accum.poses/1) and/or ``.mcap``
-    (the tracked poses as FrameTransforms on ``poses_topic``, child frame ``poses_child_frame``,
-    default ``<object>_tracked``, so they sit beside the recording's own /tf in Foxglove).
+    every later frame from the images alone. outputs: ``.json`` (accum.poses/1), ``.tum`` (the
+    tracked poses for evo) and/or ``.mcap`` (the tracked poses as FrameTransforms on
+    ``poses_topic``, child frame ``poses_child_frame``, default ``<object>_tracked``, so they sit
+    beside the recording's own /tf in Foxglove).
     """
     if not isinstance(model, Segments):
         model_path, model = model, read_model(model)
@@ -98,7 +100,9 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
         track = PoseTrack(rec.camera_frame, rec.object_frame, np.array(times, np.int64),
                           np.array(poses).reshape(-1, 4, 4), status, extra)
         for path in outputs:
-            if str(path).lower().endswith(".mcap"):
+            if str(path).lower().endswith(".tum"):
+                write_poses_tum(files.path(path), track)
+            elif str(path).lower().endswith(".mcap"):
                 write_poses_mcap(files.path(path), track, topic=poses_topic,
                                  child_frame=poses_child_frame or f"{rec.object_frame}_tracked")
             else:
