@@ -15,6 +15,7 @@ from ..pipeline import AccumulateParams, LineAccumulation
 from ..segments import Segments
 from .base import FrameRange, Progress, RecordingOptions, no_progress, nothing_done
 from .checks import check_truth_matches
+from .parallel import extracted_frames
 from .rerun_sink import rerun_log
 
 log = logging.getLogger("accumcli")
@@ -49,13 +50,15 @@ class AccumulationResult:
 def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = AccumulateParams(),
                          options: RecordingOptions = RecordingOptions(), frames: FrameRange = FrameRange(),
                          truth=None, history=None, rrd=None, png=None, panel=None, ply_all: bool = False,
-                         progress: Progress = no_progress) -> AccumulationResult:
+                         workers: int = 1, progress: Progress = no_progress) -> AccumulationResult:
     """Accumulate the frames in ``frames`` of ``recording`` into one model.
 
     outputs: model files, ``.json`` (accum.model/1) and/or ``.ply`` (accepted segments; all with
     ``ply_all``); truth: a truth sidecar path, to score the model frame by frame; history: JSON lines,
     one row per frame; rrd: a Rerun recording; png / panel: pictures of the model and of the last frame.
-    All outputs are checked before the work and written together at the end.
+    All outputs are checked before the work and written together at the end. workers: processes
+    extracting the next frames while this one accumulates (``runs.parallel``; the same model bytes
+    whatever the number).
     """
     files = OutputSet([*outputs, history, rrd, png, panel])
     edges = None
@@ -69,7 +72,9 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
         acc = LineAccumulation(params, rec.object_frame, rec.camera_frame)
         result = AccumulationResult(acc.model(), times=acc.times)
         step, done = None, 0
-        with rerun_log(files, rrd, "accumulate") as viz:
+
+        def frames_with_pose():
+            nonlocal done
             for frame in rec.frames(frames.start, frames.stop):
                 done += 1
                 progress(done, total)
@@ -77,7 +82,12 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
                     log.warning("%s: frame %d: no pose (%s): skipped", recording, frame.index, frame.pose_problem)
                     result.skipped[frame.pose_problem] = result.skipped.get(frame.pose_problem, 0) + 1
                     continue
-                step = acc.step(frame, frame.T_camera_object)
+                yield frame
+
+        with rerun_log(files, rrd, "accumulate") as viz:
+            for frame, extraction in extracted_frames(frames_with_pose(), params.extract, rec.camera_frame, workers,
+                                                      acc.times):
+                step = acc.step(frame, frame.T_camera_object, extraction)
                 row = {"frame_index": frame.index, "timestamp_ns": frame.timestamp_ns, **step.stats.__dict__}
                 if step.tracking is not None:
                     row.update(tracking=step.tracking.status, residual_px=step.tracking.residual_px)

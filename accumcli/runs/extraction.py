@@ -7,12 +7,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..extract import ExtractParams, extract_frame
+from ..extract import ExtractParams
 from ..geometry import quat_from_transform
 from ..lines2d import StageTimes
 from ..model_io import FramesWriter
 from ..outputs import OutputSet
 from .base import FrameRange, Progress, RecordingOptions, no_progress, nothing_done
+from .parallel import extracted_frames
 from .rerun_sink import rerun_log
 
 
@@ -37,21 +38,23 @@ class ExtractionResult:
 
 def extract_recording(recording, output, *, params: ExtractParams = ExtractParams(),
                       options: RecordingOptions = RecordingOptions(), frames: FrameRange = FrameRange(),
-                      rrd=None, with_2d: bool = False, progress: Progress = no_progress) -> ExtractionResult:
+                      rrd=None, with_2d: bool = False, workers: int = 1,
+                      progress: Progress = no_progress) -> ExtractionResult:
     """Extract every stereo frame in ``frames`` of ``recording`` into ``output`` (JSON lines, one
     model-format object per frame in the left camera frame, with the recorded pose where there is
     one; formats.md), and the rectified intrinsics. ``with_2d``: each line also carries the left
     2D segments (``segments_2d``: endpoints u0, v0, u1, v1 px, the indices of those that became 3D
     segments, and the critical angle) for the funnel of ``accum eval``. ``rrd``: also a Rerun
-    recording. Needs no object pose."""
+    recording. ``workers``: extracting processes (the same bytes whatever the number). Needs no
+    object pose."""
     outputs = OutputSet([output, rrd])
     result = ExtractionResult(outputs=[p for p in (output, rrd) if p])
     t0 = time.perf_counter()
     with options.open(recording, require_pose=False) as rec, outputs:
         total = frames.check(rec)
         with FramesWriter(outputs.path(output)) as out, rerun_log(outputs, rrd, "extract") as viz:
-            for frame in rec.frames(frames.start, frames.stop):
-                extraction = extract_frame(frame, params, rec.camera_frame, result.times)
+            for frame, extraction in extracted_frames(rec.frames(frames.start, frames.stop), params,
+                                                      rec.camera_frame, workers, result.times):
                 header = {"frame_index": frame.index, "counts": extraction.counts,
                           "intrinsics": frame.intrinsics.as_dict()}
                 if with_2d:

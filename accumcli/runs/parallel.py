@@ -1,0 +1,54 @@
+"""Extraction of the next frames in other processes while the current one is accumulated.
+
+Frames are independent given the recorded poses, so with ``workers`` > 1 the frames read (in
+this process, in order) are extracted by a pool of ``workers`` processes, at most
+``2 * workers`` frames ahead, and handed back in recording order: memory stays bounded and the
+result is the same, byte for byte, whatever the number of workers (extraction of one frame is
+deterministic). With ``workers`` = 1 extraction runs inline, without a pool.
+"""
+
+from __future__ import annotations
+
+import collections
+from concurrent.futures import ProcessPoolExecutor
+from typing import Iterable, Iterator
+
+from ..extract import ExtractParams, FrameSegments, extract_frame
+from ..lines2d import StageTimes
+from ..recording import StereoFrame
+
+
+def _one_thread() -> None:
+    import cv2
+
+    cv2.setNumThreads(1)
+
+
+def _extract(frame: StereoFrame, params: ExtractParams, camera_frame: str) -> tuple[FrameSegments, dict]:
+    times = StageTimes()
+    return extract_frame(frame, params, camera_frame, times), times.seconds
+
+
+def extracted_frames(frames: Iterable[StereoFrame], params: ExtractParams, camera_frame: str, workers: int,
+                     times: StageTimes) -> Iterator[tuple[StereoFrame, FrameSegments]]:
+    """(frame, its extraction) in recording order; per-stage times are added to ``times``."""
+    if workers <= 1:
+        for frame in frames:
+            yield frame, extract_frame(frame, params, camera_frame, times)
+        return
+    with ProcessPoolExecutor(workers, initializer=_one_thread) as pool:
+        pending: collections.deque = collections.deque()
+        for frame in frames:
+            pending.append((frame, pool.submit(_extract, frame, params, camera_frame)))
+            if len(pending) >= 2 * workers:
+                yield _collect(pending.popleft(), times)
+        while pending:
+            yield _collect(pending.popleft(), times)
+
+
+def _collect(item, times: StageTimes) -> tuple[StereoFrame, FrameSegments]:
+    frame, future = item
+    extraction, seconds = future.result()
+    for stage, value in seconds.items():
+        times.seconds[stage] = times.seconds.get(stage, 0.0) + value
+    return frame, extraction
