@@ -16,3 +16,7 @@ class FileFormatError(AccumError):
 
 class PoseUnavailable(AccumError):
     """No pose at a given time (outside the transform samples, invalid sample)."""
+
+
+class InputError(AccumError, ValueError):
+    """An array handed to the library is not what it must be (shape, rigidity, finiteness)."""

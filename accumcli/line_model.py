@@ -45,10 +45,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import invert, transform_points
+from .geometry import check_points, check_transform, invert, transform_points
 from .metric import MetricThresholds, candidate_pairs, d_o, d_p
 from .recording import StereoIntrinsics
 from .segments import Segments, concatenate
+from .visibility import segments_in_both_images
 
 
 
@@ -59,7 +60,6 @@ class LineModelParams:
     max_weight: float = 20.0
     aspect_margin_deg: float = 15.0
     critical_angle_deg: float = 12.0
-    image_margin_px: float = 5.0
     duplicate_shift: float = 0.25     # fraction of a length; closer centres along the line are duplicates
     max_views: int = 6                # viewing directions kept per segment
     view_step_deg: float = 10.0       # a new viewing direction is kept if this far from the stored ones
@@ -69,10 +69,14 @@ class LineModelParams:
 
 @dataclass
 class FrameContext:
-    """What the entity type needs to know of the frame: the pose used and the cameras."""
+    """What the entity type needs to know of the frame: the pose used, T_camera_object (4, 4)
+    (checked: ``InputError`` if not a rigid transform), and the cameras."""
 
     T_camera_object: np.ndarray
     intrinsics: StereoIntrinsics
+
+    def __post_init__(self):
+        self.T_camera_object = check_transform(self.T_camera_object, "T_camera_object")
 
 
 class LineSegmentType:
@@ -197,14 +201,8 @@ class LineSegmentType:
         """(N,) bool: the frame should have shown these model segments (see the module docstring)."""
         p, intr = self.params, context.intrinsics
         T = context.T_camera_object
-        ends = transform_points(T, model.endpoints().reshape(-1, 3))
-        uv_left, uv_right, z = intr.project(ends)
-        m = p.image_margin_px
-        inside = (z > 0.05)
-        for uv in (uv_left, uv_right):
-            inside &= (uv[:, 0] >= m) & (uv[:, 0] <= intr.width - 1 - m) & (uv[:, 1] >= m) & \
-                      (uv[:, 1] <= intr.height - 1 - m)
-        inside = inside.reshape(-1, 2).all(axis=1)
+        inside = segments_in_both_images(model, T, intr)
+        uv_left = intr.project(transform_points(T, model.endpoints().reshape(-1, 3)))[0]
         d2 = (uv_left[1::2] - uv_left[0::2])
         angle = np.degrees(np.arctan2(np.abs(d2[:, 1]), np.abs(d2[:, 0])))
         not_critical = angle >= p.critical_angle_deg + 3.0

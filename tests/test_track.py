@@ -82,9 +82,10 @@ def test_ransac_recovers_a_pose_from_3d_segments():
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     observed = Segments("camera", centers, dirs, np.full(len(centers), 0.012), np.ones(len(centers)),
                         np.ones(len(centers), np.int64))
-    T, support = ransac_pose(model, observed, np.random.default_rng(0))
-    rotation, translation = pose_error(T, T_true)
-    assert support >= 0.8 * keep.sum() and rotation < 1.0 and translation < 0.003
+    result = ransac_pose(model, observed, np.random.default_rng(0))
+    rotation, translation = pose_error(result.pose, T_true)
+    assert result.support >= 0.8 * keep.sum() and rotation < 1.0 and translation < 0.003
+    assert result.reason == "" and result.hypotheses[0][1] == result.support
 
 
 def test_track_command_writes_poses_json_and_mcap(noisy_pair, tmp_path):
