@@ -30,8 +30,8 @@ by the known motion (the entity type's ``transform``):
 The log-odds L of confidence c is ``log(c / (1 - c))``, clamped to
 ``ceiling``. With the defaults a hit adds log 5 = 1.61 and a miss
 log(5/9) = -0.59: a new entity (0.25) is accepted (>= 0.5) at its first
-confirmation, i.e. seen in two frames, and is pruned after three expected misses
-without confirmation; an entity of the object survives as long as it is
+confirmation, i.e. seen in two frames, and is pruned after two expected misses
+without confirmation (0.25 -> 0.16 -> 0.09, below ``floor``); an entity of the object survives as long as it is
 extracted in more than about a quarter of the frames that should show it.
 """
 

@@ -25,7 +25,7 @@ def check_transform(T, name: str = "T_camera_object") -> np.ndarray:
         raise InputError(f"{name}: expected a (4, 4) rigid transform, got non-finite entries (NaN or inf)")
     if not np.array_equal(T[3], [0.0, 0.0, 0.0, 1.0]):
         raise InputError(f"{name}: not a rigid transform: the last row must be [0, 0, 0, 1], got "
-                         f"{np.array2string(T[3], precision=3, separator=', ')}")
+                         f"[{', '.join(f'{x:.3g}' for x in T[3])}] (a transposed matrix?)")
     R = T[:3, :3]
     deviation = float(np.abs(R.T @ R - np.eye(3)).max())
     if deviation > RIGID_TOLERANCE:

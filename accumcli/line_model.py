@@ -7,22 +7,24 @@ Entities are ``Segments`` in the object frame with running sums in ``extra``:
   ``sigma_lat^2 I + (sigma_depth^2 - sigma_lat^2) r r^T`` (r the viewing ray:
   depth is the weak direction of stereo), and it informs the position only
   across its direction u: along the line, where a local segment is cut is
-  arbitrary (the aperture problem), so a model segment keeps the place along
-  the line where it was created (``anchor``, the information
-  ``12 / length^2`` of its first observation). Without this, merged pieces
-  drift along their edge, bunch up and leave gaps. The merge is thus a
-  weighted average that trusts each view where it is precise, each view
-  weighted by its match confidence;
+  arbitrary (the aperture problem), so observations are not averaged along
+  the line (``anchor``, the information ``12 / length^2`` of the segment's
+  first observation, only keeps the system solvable). Across the line the
+  merge is thus a weighted average that trusts each view where it is precise,
+  each view weighted by its match confidence;
 - ``dir_sum`` (N, 3): the sum of the sign-aligned directions, each weighted by
   its confidence and the inverse variance of its direction (a segment fitted
   along a long stretch is sure of its direction, one alone is not);
   ``weight`` (N,): the sum of confidences;
-- the extent along the line (centre and length) is the union of the extents
-  of the observations merged into the segment, at most ``max_extent``
-  observation lengths: a confirmation by a piece cut further along the edge
-  extends the segment instead of leaving a gap that neither neighbour covers
-  (the metric forgives shifts of half a length, so the gap's own pieces
-  confirm the neighbours and are never added);
+- along the line, the segment covers the union of its extent and the merged
+  observation's, its centre re-placed at the middle of that union: an
+  observation of the same length shifted by 4 mm along the line moves the
+  centre by 2 mm and lengthens the segment by 4 mm. The union is trimmed
+  equally at both ends to at most ``max_extent`` observation lengths, so the
+  centre stays at its middle. A confirmation by a piece cut further along the
+  edge thus extends the segment instead of leaving a gap that neither
+  neighbour covers (the metric forgives shifts of half a length, so the gap's
+  own pieces confirm the neighbours and are never added);
 - ``views`` (N, K, 3): up to K unit directions (object frame, segment to
   camera) from which the segment was confirmed, at least ``view_step_deg``
   apart (zero vectors where unused): the set of aspects in which it has been
@@ -32,7 +34,8 @@ Running sums are scaled down once their weight passes ``max_weight``, so a
 long-lived segment still follows new evidence.
 
 ``expected`` (beyond the paper): a model segment should be seen in a frame only
-if both its endpoints are in front of the camera and inside both images, it
+if both its endpoints are in view (``visibility.segments_in_both_images``: in
+front of the camera and ``IMAGE_MARGIN_PX`` inside both images), it
 is not near the critical plane, and the camera looks at it from within
 ``aspect_margin_deg`` of a direction it was confirmed from. For a rigid object and
 gripper, what is visible depends on the viewing direction only, so a segment
@@ -122,7 +125,9 @@ class LineSegmentType:
         return same, (position / th.s_p) ** 2 + (angle / np.radians(th.s_o_deg)) ** 2
 
     def observe(self, observed: Segments, context: FrameContext) -> Segments:
-        """Initialise the running sums of observations (already in the object frame)."""
+        """Initialise the running sums of observations (already in the object frame; ``InputError``
+        if a centre is not finite)."""
+        check_points(observed.centers, "observed segment centres")
         p = self.params
         camera_in_object = invert(context.T_camera_object)[:3, 3]
         to_camera = camera_in_object - observed.centers
@@ -163,8 +168,8 @@ class LineSegmentType:
             shape = (-1,) + (1,) * (x[key].ndim - 1)
             extra[key][mi] = x[key][mi] * scale.reshape(shape)
         sign = np.where(np.sum(model.directions[mi] * observed.directions[oi], axis=1) >= 0, 1.0, -1.0)
-        # the observation informs the position across its direction only: the model segment keeps
-        # its place along the line (where a local segment was cut is arbitrary)
+        # the observation informs the position across its direction only (where a local segment was
+        # cut along the line is arbitrary); the place along the line is set by the extents below
         u_o = observed.directions[oi]
         along = o["anchor"][oi][:, None, None] * u_o[:, :, None] * u_o[:, None, :]
         extra["info"][mi] += o["info"][oi] - along

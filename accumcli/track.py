@@ -4,13 +4,15 @@ re-acquisition of a lost pose.
 ``refine_pose`` moves a pose until the model's accepted segments, projected
 into both rectified images, lie on image edges:
 
-- sample points along each visible model segment (in front of the camera,
-  inside the image, and, when the model carries them, within its cone of
-  viewing directions plus ``aspect_margin_deg``);
+- sample points along each visible model segment (in view:
+  ``visibility.segments_in_both_images``, the test accumulation uses too; and,
+  when the model carries them, within its cone of viewing directions plus
+  ``aspect_margin_deg``);
 - for each point and image, search along the projected segment's normal,
   within ``search_px``, for the ``candidates`` strongest gradient maxima whose
   orientation agrees with the normal (polarity-free), each to sub-pixel
-  precision;
+  precision (``lines2d.parabola_peak``), on the frame's ``lines2d.Gradients``
+  (shared with extraction when the caller passes them);
 - Gauss-Newton on SE(3) (increments in the camera frame, rotating about the
   visible model's centroid) over the signed point-to-line distances in both images, each point taking,
   at every iteration, the candidate nearest its current projection (parallel
@@ -24,10 +26,12 @@ RMS distance is at most ``max_rms_px``; otherwise ``lost``.
 
 ``PoseTracker`` follows a sequence. It refines from both the constant-velocity
 prediction and the last pose (the better wins: an object swung back and forth
-turns back between frames). After a loss, or when the frames are too far apart
-in time for any prediction (``max_gap_s``: snapshots, not video), it
-re-acquires: from the last good pose with a wide search, and by RANSAC over
-3D-3D segment correspondences (``ransac_pose``). The angle and the distance
+turns back between frames); when the prediction's refinement is not tracked, also
+from the last pose with a wide search (``reacquire_search_px``; not on a
+re-acquisition). Whenever the best of these is lost, and
+always when there is no tracked frame yet or the last one is more than
+``max_gap_s`` ago (snapshots, not video: no prediction holds), it re-acquires by
+RANSAC over 3D-3D segment correspondences (``ransac_pose``). The angle and the distance
 between the lines of two segments are invariant under rigid motion, so pairs
 of the frame's extracted segments are matched to model pairs with the same
 invariants; each match proposes a pose, the few distinct poses that bring the
@@ -399,10 +403,11 @@ class PoseTracker:
         ``Gradients`` if already computed (pass the same to the extraction behind ``observe`` so that
         the frame's gradients are computed once).
 
-        When the motion since the last tracked frame is unknown (after a loss, or a gap longer than
-        ``max_gap_s``: snapshots rather than video) the frame is a re-acquisition: refinement from the
-        last pose and from a RANSAC pose compete, judged by 3D support (model segments landing on the
-        frame's extracted segments), since a wrong local minimum in a cluttered image can still find
+        When the motion since the last tracked frame is unknown (no guess and no tracked frame yet,
+        or a gap longer than ``max_gap_s``: snapshots rather than video), or when the refinements
+        end lost, the frame is a re-acquisition (given ``observe``): the refinements and those from
+        the RANSAC poses compete, judged by 3D support (model segments landing on the frame's
+        extracted segments), since a wrong local minimum in a cluttered image can still find
         plenty of edges. A failure is never raised: the estimate is 'lost', with its ``reason``.
         Raises ``InputError`` if ``T_guess`` is not a rigid transform.
         """
