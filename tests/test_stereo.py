@@ -50,3 +50,19 @@ def test_slanted_edge_direction_from_global_support():
     angle = np.degrees(np.arccos(np.clip(np.abs(seg.directions[on_top] @ top), 0, 1)))
     print(f"receding edge: {on_top.sum()} segments, direction error median {np.median(angle):.2f} deg")
     assert np.median(angle) < 3.0
+
+
+def test_extraction_returns_its_gradients_and_reuses_given_ones():
+    from accumcli.lines2d import frame_gradients
+
+    square, _ = rotated_square((0.0, 0.0), 0.04, 20.0, 0.5)
+    frame = render_pair([square], seed=6)
+    first = extract_frame(frame, ExtractParams())
+    left, right = first.gradients
+    assert left.gx.shape == frame.left.shape and not np.array_equal(left.gx, right.gx)
+    given = frame_gradients(frame)
+    again = extract_frame(frame, ExtractParams(), gradients=given)
+    assert again.gradients[0] is given[0] and again.gradients[1] is given[1]
+    assert np.array_equal(again.segments.centers, first.segments.centers) and len(first.segments) >= 8
+    flat = tuple(type(g)(np.zeros_like(g.gx), np.zeros_like(g.gy), 1.0, 3.0, 1.5) for g in given)
+    assert len(extract_frame(frame, ExtractParams(), gradients=flat).segments) == 0   # they are used
