@@ -44,14 +44,15 @@ def extract_frame(frame: StereoFrame, params: ExtractParams = ExtractParams(), c
                   times: StageTimes | None = None,
                   gradients: tuple[Gradients, Gradients] | None = None) -> FrameSegments:
     """Local 3D line segments of one rectified stereo frame. ``gradients``: the frame's (left,
-    right) ``Gradients`` if already computed (e.g. by tracking, with the same ``params.lines``),
-    else computed here; either way returned in the result."""
+    right) ``Gradients`` if already computed (e.g. ``lines2d.frame_gradients(frame,
+    params.lines)``, also given to tracking), reused as ``Gradients.of(..., reuse=)`` says;
+    the gradients used are returned in the result."""
     times = times or StageTimes()
     detect = DETECTORS[params.lines.detector]
     sides, grads = [], []
     for side, image in enumerate((frame.left, frame.right)):
         t0 = time.perf_counter()
-        grad = gradients[side] if gradients is not None else Gradients.of(image, params.lines)
+        grad = Gradients.of(image, params.lines, gradients[side] if gradients is not None else None)
         times.add("gradients", t0)
         sides.append(detect(image, params.lines, grad, times))
         grads.append(grad)

@@ -10,8 +10,9 @@ the gradient is strong and its orientation agrees with the line's normal):
    the gradient direction.
 2. Hough: every edge pixel votes, weighted by its gradient magnitude and a
    triangular kernel, only for line normals within ``vote_window_deg`` of its
-   own gradient orientation (undirected: normal angles in [0, 180), the
-   rho axis mirrored at the wrap). Peaks are local maxima of the accumulator.
+   own orientation (the smoothed structure tensor's, steadier than its
+   gradient's; undirected: normal angles in [0, 180), the rho axis mirrored at
+   the wrap). Peaks are local maxima of the accumulator.
 3. Each edge pixel joins the candidate line nearest to it among the peaks its
    own votes landed near. A line's pixels are fitted (weighted total least
    squares); along it, runs of supporting pixels (same polarity, small gaps)
@@ -120,10 +121,17 @@ class Gradients:
     tensor_sigma: float
 
     @classmethod
-    def of(cls, image: np.ndarray, params: "LineParams | None" = None) -> "Gradients":
+    def of(cls, image: np.ndarray, params: "LineParams | None" = None,
+           reuse: "Gradients | None" = None) -> "Gradients":
         """Gradients of an (H, W) uint8 image with ``params``' blur, Canny threshold and tensor
-        smoothing (``LineParams()`` when None)."""
+        smoothing (``LineParams()`` when None). ``reuse``: gradients already computed for this
+        image; returned as they are if made with the same parameters, their gx, gy shared if only
+        the threshold or the tensor smoothing differ, ignored if the blur does."""
         params = params or LineParams()
+        if reuse is not None and reuse.blur_sigma == params.blur_sigma:
+            if (reuse.gradient_threshold, reuse.tensor_sigma) == (params.gradient_threshold, params.tensor_sigma):
+                return reuse
+            return cls(reuse.gx, reuse.gy, params.blur_sigma, params.gradient_threshold, params.tensor_sigma)
         blurred = cv2.GaussianBlur(image, (0, 0), params.blur_sigma) if params.blur_sigma > 0 else image
         # Sobel of 8-bit grey levels is an integer: float32 holds it, and gx * 8 gives it back exactly
         gx = cv2.Sobel(blurred, cv2.CV_32F, 1, 0, ksize=3) / np.float32(8.0)

@@ -174,7 +174,7 @@ def _jacobian(points_cam: np.ndarray, normal: np.ndarray, intr: StereoIntrinsics
 
 def _gradients(frame: StereoFrame, params: TrackParams, gradients: tuple | None) -> tuple[Gradients, Gradients]:
     """The frame's (left, right) gradients: ``gradients`` if given with the blur ``params`` asks
-    for, else computed."""
+    for (tracking needs only gx, gy), else computed."""
     if gradients is not None and all(g.blur_sigma == params.blur_sigma for g in gradients):
         return gradients
     return frame_gradients(frame, LineParams(blur_sigma=params.blur_sigma))

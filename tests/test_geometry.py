@@ -94,3 +94,13 @@ def test_entry_points_reject_a_bad_transform():
         PoseTracker(broken)
     with pytest.raises(InputError, match=r"^observed segment centres: expected finite"):
         kind.observe(broken, FrameContext(T_GOOD, INTRINSICS))
+
+
+def test_transformed_moves_centres_and_directions_and_keeps_extra_columns():
+    segments = _segments(2)
+    segments.extra = {"view_direction": np.tile([0.0, 0.0, -1.0], (2, 1))}
+    turn = make_transform(Rotation.from_rotvec([0.0, 0.0, np.pi / 2]).as_matrix(), [0.0, 0.0, 0.5])
+    moved = segments.transformed(turn, "camera")
+    assert moved.frame_id == "camera" and np.allclose(moved.centers, [[0.0, 0.0, 0.5]] * 2)
+    assert np.allclose(moved.directions, [[-1.0, 0.0, 0.0]] * 2)
+    assert moved.extra["view_direction"] is segments.extra["view_direction"]
