@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -216,3 +217,15 @@ def test_tracker_uses_the_gradients_it_is_given(noisy_pair, model_of_exact):
     for g in blurred:
         g.gx[:] = 0
     assert PoseTracker(model_of_exact).update(frame, frame.T_camera_object, gradients=blurred).status == "tracked"
+
+
+def test_reacquisition_without_3d_support_is_lost_with_a_reason(noisy_pair, model_of_exact):
+    exact, _ = noisy_pair
+    with Recording(exact) as rec:
+        frame = next(iter(rec.frames(0, 1)))
+    tracker = PoseTracker(model_of_exact, history=[frame.T_camera_object], last_time_ns=frame.timestamp_ns - 10**10)
+    unrelated = _box_model().transformed(make_transform(np.eye(3), [0.3, 0.3, 2.0]), "camera_left")   # 10 s gap
+    estimate = tracker.update(frame, None, lambda: unrelated)
+    assert estimate.status == "lost" and estimate.inliers >= 30     # the images agree, the 3D segments do not
+    assert re.fullmatch(r"0 of \d+ model segments in view found a 3D counterpart \(needs 20%\)"
+                        r"(; re-acquisition: .*)?", estimate.reason), estimate.reason
