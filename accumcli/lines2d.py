@@ -99,7 +99,7 @@ class Segments2D:
         return np.stack([self.centers - half, self.centers + half], axis=1)
 
 
-@dataclass
+@dataclass(eq=False)
 class Gradients:
     """The gradients of one (H, W) uint8 image, computed once and shared by 2D extraction and
     tracking (``Gradients.of``): gx, gy (H, W) float32, grey levels per pixel, Sobel on the image
