@@ -30,8 +30,8 @@ by the known motion (the entity type's ``transform``):
 The log-odds L of confidence c is ``log(c / (1 - c))``, clamped to
 ``ceiling``. With the defaults a hit adds log 5 = 1.61 and a miss
 log(5/9) = -0.59: a new entity (0.25) is accepted (>= 0.5) at its first
-confirmation, i.e. seen in two frames, and is pruned after three expected misses
-without confirmation; an entity of the object survives as long as it is
+confirmation, i.e. seen in two frames, and is pruned after two expected misses
+without confirmation (0.25 -> 0.16 -> 0.09, below ``floor``); an entity of the object survives as long as it is
 extracted in more than about a quarter of the frames that should show it.
 """
 
@@ -42,6 +42,7 @@ from typing import Any, Generic, Protocol, TypeVar
 
 import numpy as np
 
+from .geometry import check_transform
 from .grouping import best_per_key
 
 E = TypeVar("E")
@@ -155,7 +156,7 @@ class Accumulator(Generic[E]):
     """A model of entities with confidences, updated frame by frame."""
 
     def __init__(self, entity_type: EntityType[E], empty: E, rule: UpdateRule = UpdateRule()):
-        self.type = entity_type
+        self.entity_type = entity_type
         self.rule = rule
         self.entities = empty
         self.log_odds = np.zeros(0)
@@ -172,20 +173,22 @@ class Accumulator(Generic[E]):
 
     def update(self, observed: E, T_model_observed: np.ndarray, context: Any = None) -> StepStats:
         """Accumulate one frame's ``observed`` entities, given in their sensor's frame;
-        ``T_model_observed`` (the known motion) maps them into the model's frame."""
-        rule, T = self.rule, self.type
-        observed = T.observe(T.transform(observed, T_model_observed), context)
-        n_model, n_obs = len(self), T.size(observed)
-        all_mi, all_oi, cost = T.correspondences(self.entities, observed)
+        ``T_model_observed`` (4, 4), the known motion, maps them into the model's frame
+        (``InputError`` if it is not a rigid transform)."""
+        T_model_observed = check_transform(T_model_observed, "T_model_observed")
+        rule, kind = self.rule, self.entity_type
+        observed = kind.observe(kind.transform(observed, T_model_observed), context)
+        n_model, n_obs = len(self), kind.size(observed)
+        all_mi, all_oi, cost = kind.correspondences(self.entities, observed)
         keep = one_to_one(all_mi, all_oi, cost)
         mi, oi = all_mi[keep], all_oi[keep]
-        expected = T.expected(self.entities, context) if n_model else np.zeros(0, bool)
+        expected = kind.expected(self.entities, context) if n_model else np.zeros(0, bool)
         confirmed = np.zeros(n_model, bool)
         confirmed[all_mi] = True
         missed = expected & ~confirmed
         candidates = _sharing(all_mi, all_oi)
         if len(mi):
-            self.entities = T.merge(self.entities, observed, mi, oi, context)
+            self.entities = kind.merge(self.entities, observed, mi, oi, context)
         self.log_odds = np.minimum(self.log_odds + rule.hit * confirmed + rule.miss * missed, logit(rule.ceiling))
         self.observations = self.observations + confirmed
         self.last_confirmed = np.where(confirmed, self.frame, self.last_confirmed)
@@ -201,7 +204,7 @@ class Accumulator(Generic[E]):
         n_new = int(fresh.sum())
         if n_pruned or n_merged or n_new:
             index = np.flatnonzero(alive)
-            self.entities = T.concatenate(T.select(self.entities, index), T.select(observed, np.flatnonzero(fresh)))
+            self.entities = kind.concatenate(kind.select(self.entities, index), kind.select(observed, np.flatnonzero(fresh)))
             self.log_odds = np.concatenate([self.log_odds[index], np.full(n_new, logit(rule.initial))])
             self.observations = np.concatenate([self.observations[index], np.ones(n_new, np.int64)])
             self.last_confirmed = np.concatenate([self.last_confirmed[index], np.full(n_new, self.frame)])
@@ -219,7 +222,7 @@ class Accumulator(Generic[E]):
         corresponded to nothing)."""
         if len(i) == 0:
             return 0
-        same, cost = self.type.same(self.entities, i, j)
+        same, cost = self.entity_type.same(self.entities, i, j)
         i, j, cost = i[same], j[same], cost[same]
         if len(i) == 0:
             return 0
@@ -231,7 +234,7 @@ class Accumulator(Generic[E]):
         winner, loser = winner[winner_unique], loser[winner_unique]
         if len(winner) == 0:
             return 0
-        self.entities = self.type.merge(self.entities, self.entities, winner, loser, None)
+        self.entities = self.entity_type.merge(self.entities, self.entities, winner, loser, None)
         self.log_odds[winner] = np.maximum(self.log_odds[winner], self.log_odds[loser])
         self.observations[winner] += self.observations[loser]
         self.last_confirmed[winner] = np.maximum(self.last_confirmed[winner], self.last_confirmed[loser])

@@ -134,8 +134,9 @@ def evaluate_model(model: Segments, truth: Truth, tol: Tolerances = Tolerances()
 
 def frame_accuracy(segments_camera: Segments, T_camera_object: np.ndarray, edges: EdgeSamples,
                    tol: Tolerances = Tolerances()) -> dict:
-    """Single-frame figures: the fraction of segments near the object (within the background distance)
-    that are correct, completeness of all segments, and the background fraction."""
+    """Single-frame counts of ``segments_camera`` placed in the object frame by ``T_camera_object``:
+    all segments, those near the object (within the background distance), the correct ones among
+    those, and the others (background); and the completeness of all segments."""
     segments = segments_camera.transformed(invert(T_camera_object), "object")
     distance, correct, correct_for = classify(segments, edges, tol)
     near = distance <= tol.background_dist

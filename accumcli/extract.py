@@ -1,6 +1,7 @@
 """One stereo frame in, local 3D line segments (left camera frame) out:
 2D local segments in both images (``lines2d``), stereo matching and
-triangulation (``stereo``), with a per-stage time breakdown."""
+triangulation (``stereo``), with a per-stage time breakdown. The frame's image
+gradients are returned too, for tracking in the same frame to reuse."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .lines2d import DETECTORS, LineParams, Segments2D, StageTimes, gradients
+from .lines2d import DETECTORS, Gradients, LineParams, Segments2D, StageTimes
 from .recording import StereoFrame
 from .segments import Segments
 from .stereo import Matches, StereoParams, match, triangulate
@@ -25,7 +26,8 @@ class ExtractParams:
 class FrameSegments:
     """What one frame gave: 3D segments (camera frame, in ``segments.frame_id``), the
     2D segments of both images, which left/right 2D segments each 3D one came
-    from, and counts (2D segments, critical, unmatched, 3D)."""
+    from, counts (2D segments, critical, unmatched, 3D), and the (left, right)
+    image gradients it used (``refine_pose`` and ``PoseTracker.update`` take them)."""
 
     index: int
     timestamp_ns: int
@@ -35,19 +37,25 @@ class FrameSegments:
     left_index: np.ndarray
     right_index: np.ndarray
     counts: dict
+    gradients: tuple[Gradients, Gradients] | None = None
 
 
 def extract_frame(frame: StereoFrame, params: ExtractParams = ExtractParams(), camera_frame: str = "camera_left",
-                  times: StageTimes | None = None) -> FrameSegments:
-    """Local 3D line segments of one rectified stereo frame."""
+                  times: StageTimes | None = None,
+                  gradients: tuple[Gradients, Gradients] | None = None) -> FrameSegments:
+    """Local 3D line segments of one rectified stereo frame. ``gradients``: the frame's (left,
+    right) ``Gradients`` if already computed (e.g. ``lines2d.frame_gradients(frame,
+    params.lines)``, also given to tracking), reused as ``Gradients.of(..., reuse=)`` says;
+    the gradients used are returned in the result."""
     times = times or StageTimes()
     detect = DETECTORS[params.lines.detector]
-    sides = []
-    for image in (frame.left, frame.right):
+    sides, grads = [], []
+    for side, image in enumerate((frame.left, frame.right)):
         t0 = time.perf_counter()
-        grad = gradients(image, params.lines)
+        grad = Gradients.of(image, params.lines, gradients[side] if gradients is not None else None)
         times.add("gradients", t0)
         sides.append(detect(image, params.lines, grad, times))
+        grads.append(grad)
     left, right = sides
     t0 = time.perf_counter()
     m: Matches = match(frame.left, frame.right, left, right, frame.intrinsics, params.stereo)
@@ -57,4 +65,4 @@ def extract_frame(frame: StereoFrame, params: ExtractParams = ExtractParams(), c
     counts = {"left_2d": len(left), "right_2d": len(right), "critical": m.critical,
               "unmatched": m.unmatched + (len(m.left) - len(kept)), "segments": len(segments)}
     return FrameSegments(frame.index, frame.timestamp_ns, segments, left, right, m.left[kept], m.right[kept],
-                         counts)
+                         counts, tuple(grads))

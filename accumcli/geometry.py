@@ -9,6 +9,42 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
+from .errors import InputError
+
+RIGID_TOLERANCE = 1e-5  # largest |R^T R - I| entry a rigid transform may show (files round to 7 digits)
+
+
+def check_transform(T, name: str = "T_camera_object") -> np.ndarray:
+    """``T`` as a (4, 4) float64 rigid transform; raises ``InputError`` naming ``name`` and what is
+    wrong: the shape, a non-finite entry, the last row, ``R^T R`` farther than ``RIGID_TOLERANCE``
+    from I, or a reflection (det R < 0)."""
+    T = np.asarray(T, dtype=np.float64)
+    if T.shape != (4, 4):
+        raise InputError(f"{name}: expected a (4, 4) rigid transform, got shape {T.shape}")
+    if not np.isfinite(T).all():
+        raise InputError(f"{name}: expected a (4, 4) rigid transform, got non-finite entries (NaN or inf)")
+    if not np.array_equal(T[3], [0.0, 0.0, 0.0, 1.0]):
+        raise InputError(f"{name}: not a rigid transform: the last row must be [0, 0, 0, 1], got "
+                         f"[{', '.join(f'{x:.3g}' for x in T[3])}] (a transposed matrix?)")
+    R = T[:3, :3]
+    deviation = float(np.abs(R.T @ R - np.eye(3)).max())
+    if deviation > RIGID_TOLERANCE:
+        raise InputError(f"{name}: not rigid: R^T R differs from I by {deviation:.3g}")
+    if np.linalg.det(R) < 0:
+        raise InputError(f"{name}: not rigid: det R = {np.linalg.det(R):.3g}, a reflection")
+    return T
+
+
+def check_points(P, name: str = "points") -> np.ndarray:
+    """``P`` as (N, 3) float64 finite points (rows); raises ``InputError`` naming ``name``."""
+    P = np.asarray(P, dtype=np.float64)
+    if P.ndim != 2 or P.shape[1] != 3:
+        raise InputError(f"{name}: expected (N, 3) points, got shape {P.shape}")
+    if not np.isfinite(P).all():
+        bad = int((~np.isfinite(P)).any(axis=1).sum())
+        raise InputError(f"{name}: expected finite (N, 3) points, got {bad} of {len(P)} with NaN or inf")
+    return P
+
 
 def make_transform(rotation: np.ndarray, translation) -> np.ndarray:
     """(4, 4) transform from a (3, 3) rotation and a (3,) translation in metres."""
@@ -54,15 +90,14 @@ def interpolate(T0: np.ndarray, T1: np.ndarray, s: float) -> np.ndarray:
     return make_transform(R, (1.0 - s) * T0[:3, 3] + s * T1[:3, 3])
 
 
-def se3_exp(xi: np.ndarray) -> np.ndarray:
-    """Transform of a twist ``xi = (rx, ry, rz, tx, ty, tz)`` (rotation vector in
-    radians, translation in metres), as a left-multiplied increment.
-
-    The rotation and translation parts are applied independently
-    (``R = exp(r)``, ``t = t``); for the small increments of Gauss-Newton this
-    is as good as the full SE(3) exponential and keeps Jacobians simple.
-    """
-    return make_transform(Rotation.from_rotvec(xi[:3]).as_matrix(), xi[3:])
+def rotation_about_point(rotvec: np.ndarray, pivot: np.ndarray, translation) -> np.ndarray:
+    """(4, 4) transform ``p -> R (p - pivot) + pivot + translation`` with ``R = exp(rotvec)``
+    (rotation vector (3,), radians; pivot and translation (3,), metres): a rotation about
+    ``pivot`` followed by a translation, each taken as it is. This is not the SE(3)
+    exponential of a twist (whose translation would be ``V(rotvec) @ translation``); for
+    Gauss-Newton increments it keeps rotation and translation decoupled."""
+    R = Rotation.from_rotvec(rotvec).as_matrix()
+    return make_transform(R, pivot + translation - R @ pivot)
 
 
 def rotation_angle_deg(R: np.ndarray) -> float:
@@ -86,15 +121,3 @@ def mean_transform(Ts: np.ndarray) -> np.ndarray:
 def unit(vectors: np.ndarray) -> np.ndarray:
     """Rows of ``vectors: (N, 3)`` scaled to unit length."""
     return vectors / np.linalg.norm(vectors, axis=-1, keepdims=True)
-
-
-def check_transform(T, name: str = "T") -> np.ndarray:
-    """``T`` as a (4, 4) float64 rigid transform; raises ``InputError`` saying what is wrong."""
-    from .errors import InputError
-
-    T = np.asarray(T, dtype=float)
-    if T.shape != (4, 4):
-        raise InputError(f"{name}: expected a (4, 4) rigid transform, got shape {T.shape}")
-    if not np.isfinite(T).all():
-        raise InputError(f"{name}: expected a (4, 4) rigid transform, got non-finite values")
-    return T

@@ -7,22 +7,24 @@ Entities are ``Segments`` in the object frame with running sums in ``extra``:
   ``sigma_lat^2 I + (sigma_depth^2 - sigma_lat^2) r r^T`` (r the viewing ray:
   depth is the weak direction of stereo), and it informs the position only
   across its direction u: along the line, where a local segment is cut is
-  arbitrary (the aperture problem), so a model segment keeps the place along
-  the line where it was created (``anchor``, the information
-  ``12 / length^2`` of its first observation). Without this, merged pieces
-  drift along their edge, bunch up and leave gaps. The merge is thus a
-  weighted average that trusts each view where it is precise, each view
-  weighted by its match confidence;
+  arbitrary (the aperture problem), so observations are not averaged along
+  the line (``anchor``, the information ``12 / length^2`` of the segment's
+  first observation, only keeps the system solvable). Across the line the
+  merge is thus a weighted average that trusts each view where it is precise,
+  each view weighted by its match confidence;
 - ``dir_sum`` (N, 3): the sum of the sign-aligned directions, each weighted by
   its confidence and the inverse variance of its direction (a segment fitted
   along a long stretch is sure of its direction, one alone is not);
   ``weight`` (N,): the sum of confidences;
-- the extent along the line (centre and length) is the union of the extents
-  of the observations merged into the segment, at most ``max_extent``
-  observation lengths: a confirmation by a piece cut further along the edge
-  extends the segment instead of leaving a gap that neither neighbour covers
-  (the metric forgives shifts of half a length, so the gap's own pieces
-  confirm the neighbours and are never added);
+- along the line, the segment covers the union of its extent and the merged
+  observation's, its centre re-placed at the middle of that union: an
+  observation of the same length shifted by 4 mm along the line moves the
+  centre by 2 mm and lengthens the segment by 4 mm. The union is trimmed
+  equally at both ends to at most ``max_extent`` observation lengths, so the
+  centre stays at its middle. A confirmation by a piece cut further along the
+  edge thus extends the segment instead of leaving a gap that neither
+  neighbour covers (the metric forgives shifts of half a length, so the gap's
+  own pieces confirm the neighbours and are never added);
 - ``views`` (N, K, 3): up to K unit directions (object frame, segment to
   camera) from which the segment was confirmed, at least ``view_step_deg``
   apart (zero vectors where unused): the set of aspects in which it has been
@@ -32,7 +34,8 @@ Running sums are scaled down once their weight passes ``max_weight``, so a
 long-lived segment still follows new evidence.
 
 ``expected`` (beyond the paper): a model segment should be seen in a frame only
-if both its endpoints are in front of the camera and inside both images, it
+if both its endpoints are in view (``visibility.segments_in_both_images``: in
+front of the camera and ``IMAGE_MARGIN_PX`` inside both images), it
 is not near the critical plane, and the camera looks at it from within
 ``aspect_margin_deg`` of a direction it was confirmed from. For a rigid object and
 gripper, what is visible depends on the viewing direction only, so a segment
@@ -45,10 +48,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import invert, transform_points
+from .geometry import check_points, check_transform, invert, transform_points
 from .metric import MetricThresholds, candidate_pairs, d_o, d_p
 from .recording import StereoIntrinsics
 from .segments import Segments, concatenate
+from .visibility import segments_in_both_images
 
 
 
@@ -59,7 +63,6 @@ class LineModelParams:
     max_weight: float = 20.0
     aspect_margin_deg: float = 15.0
     critical_angle_deg: float = 12.0
-    image_margin_px: float = 5.0
     duplicate_shift: float = 0.25     # fraction of a length; closer centres along the line are duplicates
     max_views: int = 6                # viewing directions kept per segment
     view_step_deg: float = 10.0       # a new viewing direction is kept if this far from the stored ones
@@ -69,10 +72,14 @@ class LineModelParams:
 
 @dataclass
 class FrameContext:
-    """What the entity type needs to know of the frame: the pose used and the cameras."""
+    """What the entity type needs to know of the frame: the pose used, T_camera_object (4, 4)
+    (checked: ``InputError`` if not a rigid transform), and the cameras."""
 
     T_camera_object: np.ndarray
     intrinsics: StereoIntrinsics
+
+    def __post_init__(self):
+        self.T_camera_object = check_transform(self.T_camera_object, "T_camera_object")
 
 
 class LineSegmentType:
@@ -118,7 +125,9 @@ class LineSegmentType:
         return same, (position / th.s_p) ** 2 + (angle / np.radians(th.s_o_deg)) ** 2
 
     def observe(self, observed: Segments, context: FrameContext) -> Segments:
-        """Initialise the running sums of observations (already in the object frame)."""
+        """Initialise the running sums of observations (already in the object frame; ``InputError``
+        if a centre is not finite)."""
+        check_points(observed.centers, "observed segment centres")
         p = self.params
         camera_in_object = invert(context.T_camera_object)[:3, 3]
         to_camera = camera_in_object - observed.centers
@@ -159,8 +168,8 @@ class LineSegmentType:
             shape = (-1,) + (1,) * (x[key].ndim - 1)
             extra[key][mi] = x[key][mi] * scale.reshape(shape)
         sign = np.where(np.sum(model.directions[mi] * observed.directions[oi], axis=1) >= 0, 1.0, -1.0)
-        # the observation informs the position across its direction only: the model segment keeps
-        # its place along the line (where a local segment was cut is arbitrary)
+        # the observation informs the position across its direction only (where a local segment was
+        # cut along the line is arbitrary); the place along the line is set by the extents below
         u_o = observed.directions[oi]
         along = o["anchor"][oi][:, None, None] * u_o[:, :, None] * u_o[:, None, :]
         extra["info"][mi] += o["info"][oi] - along
@@ -197,14 +206,8 @@ class LineSegmentType:
         """(N,) bool: the frame should have shown these model segments (see the module docstring)."""
         p, intr = self.params, context.intrinsics
         T = context.T_camera_object
-        ends = transform_points(T, model.endpoints().reshape(-1, 3))
-        uv_left, uv_right, z = intr.project(ends)
-        m = p.image_margin_px
-        inside = (z > 0.05)
-        for uv in (uv_left, uv_right):
-            inside &= (uv[:, 0] >= m) & (uv[:, 0] <= intr.width - 1 - m) & (uv[:, 1] >= m) & \
-                      (uv[:, 1] <= intr.height - 1 - m)
-        inside = inside.reshape(-1, 2).all(axis=1)
+        inside = segments_in_both_images(model, T, intr)
+        uv_left = intr.project(transform_points(T, model.endpoints().reshape(-1, 3)))[0]
         d2 = (uv_left[1::2] - uv_left[0::2])
         angle = np.degrees(np.arctan2(np.abs(d2[:, 1]), np.abs(d2[:, 0])))
         not_critical = angle >= p.critical_angle_deg + 3.0

@@ -10,8 +10,9 @@ the gradient is strong and its orientation agrees with the line's normal):
    the gradient direction.
 2. Hough: every edge pixel votes, weighted by its gradient magnitude and a
    triangular kernel, only for line normals within ``vote_window_deg`` of its
-   own gradient orientation (undirected: normal angles in [0, 180), the
-   rho axis mirrored at the wrap). Peaks are local maxima of the accumulator.
+   own orientation (the smoothed structure tensor's, steadier than its
+   gradient's; undirected: normal angles in [0, 180), the rho axis mirrored at
+   the wrap). Peaks are local maxima of the accumulator.
 3. Each edge pixel joins the candidate line nearest to it among the peaks its
    own votes landed near. A line's pixels are fitted (weighted total least
    squares); along it, runs of supporting pixels (same polarity, small gaps)
@@ -32,6 +33,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import cv2
 import numpy as np
@@ -97,12 +99,16 @@ class Segments2D:
         return np.stack([self.centers - half, self.centers + half], axis=1)
 
 
-@dataclass
+@dataclass(eq=False)
 class Gradients:
-    """gx, gy, magnitude: (H, W) float32 grey levels per pixel; edges: (H, W) uint8 Canny
-    mask; tensor_cos, tensor_sin: (H, W) float32, the smoothed structure tensor as
-    (Jxx - Jyy, 2 Jxy), whose angle / 2 is the normal orientation (steadier than a single
-    pixel's gradient on weak edges; ``orientation_at`` evaluates it where needed).
+    """The gradients of one (H, W) uint8 image, computed once and shared by 2D extraction and
+    tracking (``Gradients.of``): gx, gy (H, W) float32, grey levels per pixel, Sobel on the image
+    blurred by ``blur_sigma`` px. What only extraction needs is computed on first use and kept:
+    ``magnitude`` (H, W) float32, the Canny ``edges`` (H, W) uint8 mask (high threshold
+    ``gradient_threshold`` grey levels per pixel, low half of it), and the structure tensor smoothed
+    by ``tensor_sigma`` px as ``tensor_cos``, ``tensor_sin`` = (Jxx - Jyy, 2 Jxy), whose angle / 2 is
+    the normal orientation (steadier than one pixel's gradient on weak edges; see
+    ``orientation_at``).
 
     The magnitude and angle come from numpy, which rounds exactly: OpenCV's SIMD paths
     for them depend on how the arrays happen to be aligned in memory and can differ by
@@ -110,14 +116,69 @@ class Gradients:
 
     gx: np.ndarray
     gy: np.ndarray
-    magnitude: np.ndarray
-    edges: np.ndarray
-    tensor_cos: np.ndarray
-    tensor_sin: np.ndarray
+    blur_sigma: float
+    gradient_threshold: float
+    tensor_sigma: float
+
+    @classmethod
+    def of(cls, image: np.ndarray, params: "LineParams | None" = None,
+           reuse: "Gradients | None" = None) -> "Gradients":
+        """Gradients of an (H, W) uint8 image with ``params``' blur, Canny threshold and tensor
+        smoothing (``LineParams()`` when None). ``reuse``: gradients already computed for this
+        image; returned as they are if made with the same parameters, their gx, gy shared if only
+        the threshold or the tensor smoothing differ, ignored if the blur does."""
+        params = params or LineParams()
+        if reuse is not None and reuse.blur_sigma == params.blur_sigma:
+            if (reuse.gradient_threshold, reuse.tensor_sigma) == (params.gradient_threshold, params.tensor_sigma):
+                return reuse
+            return cls(reuse.gx, reuse.gy, params.blur_sigma, params.gradient_threshold, params.tensor_sigma)
+        blurred = cv2.GaussianBlur(image, (0, 0), params.blur_sigma) if params.blur_sigma > 0 else image
+        # Sobel of 8-bit grey levels is an integer: float32 holds it, and gx * 8 gives it back exactly
+        gx = cv2.Sobel(blurred, cv2.CV_32F, 1, 0, ksize=3) / np.float32(8.0)
+        gy = cv2.Sobel(blurred, cv2.CV_32F, 0, 1, ksize=3) / np.float32(8.0)
+        return cls(gx, gy, params.blur_sigma, params.gradient_threshold, params.tensor_sigma)
+
+    @cached_property
+    def magnitude(self) -> np.ndarray:
+        return np.hypot(self.gx, self.gy)
+
+    @cached_property
+    def edges(self) -> np.ndarray:
+        high = 8.0 * self.gradient_threshold
+        dx, dy = (np.rint(g * 8).astype(np.int16) for g in (self.gx, self.gy))
+        return cv2.Canny(dx, dy, high / 2, high, L2gradient=True)
+
+    @cached_property
+    def _tensor(self) -> tuple[np.ndarray, np.ndarray]:
+        gx, gy = self.gx, self.gy
+        jxx, jxy, jyy = (cv2.GaussianBlur(a, (0, 0), self.tensor_sigma) for a in (gx * gx, gx * gy, gy * gy))
+        return jxx - jyy, 2 * jxy
+
+    @property
+    def tensor_cos(self) -> np.ndarray:
+        return self._tensor[0]
+
+    @property
+    def tensor_sin(self) -> np.ndarray:
+        return self._tensor[1]
 
     def orientation_at(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
         """Normal angle in [0, pi) of the structure tensor at pixels [rows, cols]."""
         return np.mod(np.arctan2(self.tensor_sin[rows, cols], self.tensor_cos[rows, cols]), 2 * np.pi) / 2
+
+
+def frame_gradients(frame, params: "LineParams | None" = None) -> tuple[Gradients, Gradients]:
+    """(left, right) ``Gradients`` of a rectified stereo frame (anything with ``left`` and ``right``
+    (H, W) uint8 images), for extraction and tracking in that frame to share."""
+    return Gradients.of(frame.left, params), Gradients.of(frame.right, params)
+
+
+def parabola_peak(m_minus: np.ndarray, m_center: np.ndarray, m_plus: np.ndarray) -> np.ndarray:
+    """Offset (in sample steps, unclipped) of the vertex of the parabola through the samples at
+    -1, 0, +1, for any shape of arrays; 0 where the samples do not curve downwards (no maximum).
+    Within [-0.5, 0.5] when the centre sample is the largest of the three."""
+    curvature = m_minus - 2 * m_center + m_plus
+    return np.where(curvature < 0, 0.5 * (m_minus - m_plus) / np.where(curvature < 0, curvature, -1), 0.0)
 
 
 @dataclass
@@ -130,18 +191,6 @@ class StageTimes:
         now = time.perf_counter()
         self.seconds[stage] = self.seconds.get(stage, 0.0) + now - since
         return now
-
-
-def gradients(image: np.ndarray, params: LineParams) -> Gradients:
-    """Sobel gradients (grey levels per pixel) and Canny edges of an (H, W) uint8 image."""
-    blurred = cv2.GaussianBlur(image, (0, 0), params.blur_sigma) if params.blur_sigma > 0 else image
-    dx = cv2.Sobel(blurred, cv2.CV_16S, 1, 0, ksize=3)
-    dy = cv2.Sobel(blurred, cv2.CV_16S, 0, 1, ksize=3)
-    high = 8.0 * params.gradient_threshold
-    edges = cv2.Canny(dx, dy, high / 2, high, L2gradient=True)
-    gx, gy = dx.astype(np.float32) / 8.0, dy.astype(np.float32) / 8.0
-    jxx, jxy, jyy = (cv2.GaussianBlur(a, (0, 0), params.tensor_sigma) for a in (gx * gx, gx * gy, gy * gy))
-    return Gradients(gx, gy, np.hypot(gx, gy), edges, jxx - jyy, 2 * jxy)
 
 
 def sample(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -182,9 +231,7 @@ def edge_points(grad: Gradients) -> EdgePoints:
     magnitude = grad.magnitude
     m_minus = sample(magnitude, cols - nx, rows - ny)
     m_plus = sample(magnitude, cols + nx, rows + ny)
-    curvature = m_minus - 2 * mag + m_plus
-    offset = np.where(curvature < 0, 0.5 * (m_minus - m_plus) / np.where(curvature < 0, curvature, -1), 0.0)
-    offset = np.clip(offset, -0.5, 0.5)
+    offset = np.clip(parabola_peak(m_minus, mag, m_plus), -0.5, 0.5)
     xy = np.column_stack([cols + offset * nx, rows + offset * ny]).astype(np.float64)
     return EdgePoints(xy, np.column_stack([gx, gy]).astype(np.float64), mag.astype(np.float64),
                       grad.orientation_at(rows, cols).astype(np.float64))
@@ -395,8 +442,7 @@ def refine_on_gradient(segments: Segments2D, magnitude: np.ndarray, profiles: in
     best = np.clip(np.argmax(m, axis=2), 1, len(h) - 2)
     take = lambda k: np.take_along_axis(m, (best + k)[..., None], axis=2)[..., 0]  # noqa: E731
     m0, m1, m2 = take(-1), take(0), take(1)
-    curvature = m0 - 2 * m1 + m2
-    offset = h[best] + np.where(curvature < 0, 0.5 * (m0 - m2) / np.where(curvature < 0, curvature, -1), 0.0)
+    offset = h[best] + parabola_peak(m0, m1, m2)
     peaks = base + np.clip(offset, -reach, reach)[..., None] * normals[:, None, :]
     group = np.repeat(np.arange(n), profiles)
     _, centers, directions = _weighted_line_fit(group, n, peaks.reshape(-1, 2), np.maximum(m1, 1e-6).ravel())
@@ -454,7 +500,7 @@ def detect_hough(image: np.ndarray, params: LineParams, grad: Gradients | None =
     """Local segments of an (H, W) uint8 image by the orientation-sensitive Hough transform."""
     times = times or StageTimes()
     t0 = time.perf_counter()
-    grad = grad or gradients(image, params)
+    grad = grad or Gradients.of(image, params)
     t0 = times.add("gradients", t0)
     points = edge_points(grad)
     labels = hough_assign(points, image.shape, params)
@@ -473,7 +519,7 @@ def detect_lsd(image: np.ndarray, params: LineParams, grad: Gradients | None = N
     global _LSD
     times = times or StageTimes()
     t0 = time.perf_counter()
-    grad = grad or gradients(image, params)
+    grad = grad or Gradients.of(image, params)
     t0 = times.add("gradients", t0)
     if _LSD is None:
         _LSD = cv2.createLineSegmentDetector(cv2.LSD_REFINE_STD)

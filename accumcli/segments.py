@@ -10,7 +10,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .geometry import rotate_vectors, transform_points
+from .geometry import check_transform, rotate_vectors, transform_points
 
 
 @dataclass
@@ -47,7 +47,11 @@ class Segments:
                         {k: v[index] for k, v in self.extra.items()})
 
     def transformed(self, T_new_old: np.ndarray, frame_id: str) -> "Segments":
-        """The same segments expressed in another frame (``T_new_old`` maps this frame into it)."""
+        """The same segments expressed in another frame (``T_new_old``, (4, 4), maps this frame into
+        it; ``InputError`` if it is not a rigid transform). Centres and directions are moved; the
+        ``extra`` columns are kept as they are (a vector column such as ``view_direction`` is not
+        rotated: the caller does that)."""
+        T_new_old = check_transform(T_new_old, "T_new_old")
         return replace(self, frame_id=frame_id, centers=transform_points(T_new_old, self.centers),
                        directions=rotate_vectors(T_new_old, self.directions))
 

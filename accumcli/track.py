@@ -4,13 +4,15 @@ re-acquisition of a lost pose.
 ``refine_pose`` moves a pose until the model's accepted segments, projected
 into both rectified images, lie on image edges:
 
-- sample points along each visible model segment (in front of the camera,
-  inside the image, and, when the model carries them, within its cone of
-  viewing directions plus ``aspect_margin_deg``);
+- sample points along each visible model segment (in view:
+  ``visibility.segments_in_both_images``, the test accumulation uses too; and,
+  when the model carries them, within its cone of viewing directions plus
+  ``aspect_margin_deg``);
 - for each point and image, search along the projected segment's normal,
   within ``search_px``, for the ``candidates`` strongest gradient maxima whose
   orientation agrees with the normal (polarity-free), each to sub-pixel
-  precision;
+  precision (``lines2d.parabola_peak``), on the frame's ``lines2d.Gradients``
+  (shared with extraction when the caller passes them);
 - Gauss-Newton on SE(3) (increments in the camera frame, rotating about the
   visible model's centroid) over the signed point-to-line distances in both images, each point taking,
   at every iteration, the candidate nearest its current projection (parallel
@@ -24,10 +26,12 @@ RMS distance is at most ``max_rms_px``; otherwise ``lost``.
 
 ``PoseTracker`` follows a sequence. It refines from both the constant-velocity
 prediction and the last pose (the better wins: an object swung back and forth
-turns back between frames). After a loss, or when the frames are too far apart
-in time for any prediction (``max_gap_s``: snapshots, not video), it
-re-acquires: from the last good pose with a wide search, and by RANSAC over
-3D-3D segment correspondences (``ransac_pose``). The angle and the distance
+turns back between frames); when the prediction's refinement is not tracked, also
+from the last pose with a wide search (``reacquire_search_px``; not on a
+re-acquisition). Whenever the best of these is lost, and
+always when there is no tracked frame yet or the last one is more than
+``max_gap_s`` ago (snapshots, not video: no prediction holds), it re-acquires by
+RANSAC over 3D-3D segment correspondences (``ransac_pose``). The angle and the distance
 between the lines of two segments are invariant under rigid motion, so pairs
 of the frame's extracted segments are matched to model pairs with the same
 invariants; each match proposes a pose, the few distinct poses that bring the
@@ -44,10 +48,12 @@ from typing import Callable
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .geometry import invert, make_transform, pose_error, rotate_vectors, se3_exp, transform_points
-from .lines2d import sample
+from .geometry import (check_points, check_transform, invert, make_transform, pose_error, rotate_vectors,
+                       rotation_about_point, transform_points)
+from .lines2d import Gradients, LineParams, frame_gradients, parabola_peak, sample
 from .recording import StereoFrame, StereoIntrinsics
 from .segments import Segments
+from .visibility import segments_in_both_images
 
 
 @dataclass(frozen=True)
@@ -69,12 +75,14 @@ class TrackParams:
     min_support_fraction: float = 0.2        # of visible model segments with a 3D counterpart, on re-acquisition
     ransac_hypotheses: int = 5               # distinct RANSAC poses refined on the images
     reacquire_tukey_px: tuple = (32.0, 20.0, 12.0, 6.0, 4.0, 2.5)
+    blur_sigma: float = 1.0                  # of the images before their gradients, px
 
 
 @dataclass
 class PoseEstimate:
     """T_camera_object (4, 4); residual: RMS distance of the inliers, px; inliers / measured
-    points; status 'tracked' or 'lost'; how it was found ('refined', 'wide', 'ransac')."""
+    points; status 'tracked' or 'lost'; how it was found ('refined', 'wide', 'ransac'); reason:
+    why it is 'lost' ('' when tracked)."""
 
     T_camera_object: np.ndarray
     residual_px: float
@@ -82,22 +90,7 @@ class PoseEstimate:
     measured: int
     status: str
     method: str = "refined"
-
-
-@dataclass
-class ImageGradients:
-    """gx, gy: (H, W) float32 gradients (grey levels per pixel) of one rectified image."""
-
-    gx: np.ndarray
-    gy: np.ndarray
-
-    @classmethod
-    def of(cls, image: np.ndarray, blur_sigma: float = 1.0) -> "ImageGradients":
-        import cv2
-
-        blurred = cv2.GaussianBlur(image, (0, 0), blur_sigma)
-        return cls(cv2.Sobel(blurred, cv2.CV_32F, 1, 0, ksize=3) / 8.0,
-                   cv2.Sobel(blurred, cv2.CV_32F, 0, 1, ksize=3) / 8.0)
+    reason: str = ""
 
 
 def model_samples(model: Segments, per_segment: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -109,17 +102,11 @@ def model_samples(model: Segments, per_segment: int) -> tuple[np.ndarray, np.nda
     return points.reshape(-1, 3), np.repeat(model.directions, per_segment, axis=0), owner
 
 
-def visible(model: Segments, T_camera_object: np.ndarray, intr: StereoIntrinsics, margin_deg: float,
-            border_px: float = 4.0) -> np.ndarray:
-    """(N,) bool: model segments in front of the camera, inside both images, and (if the model has
-    ``view_direction`` and ``view_spread_deg``) seen from within their cone of views plus ``margin_deg``."""
-    ends = transform_points(T_camera_object, model.endpoints().reshape(-1, 3))
-    uv_l, uv_r, z = intr.project(ends)
-    ok = z > 0.05
-    for uv in (uv_l, uv_r):
-        ok &= (uv[:, 0] >= border_px) & (uv[:, 0] <= intr.width - 1 - border_px) & (uv[:, 1] >= border_px) & \
-              (uv[:, 1] <= intr.height - 1 - border_px)
-    ok = ok.reshape(-1, 2).all(axis=1)
+def visible(model: Segments, T_camera_object: np.ndarray, intr: StereoIntrinsics, margin_deg: float) -> np.ndarray:
+    """(N,) bool: model segments in both images (``visibility.segments_in_both_images``) and (if
+    the model has ``view_direction`` and ``view_spread_deg``) seen from within their cone of views
+    plus ``margin_deg``."""
+    ok = segments_in_both_images(model, T_camera_object, intr)
     if "view_direction" in model.extra and "view_spread_deg" in model.extra:
         to_camera = invert(T_camera_object)[:3, 3] - model.centers
         to_camera /= np.linalg.norm(to_camera, axis=1, keepdims=True)
@@ -152,8 +139,7 @@ def _measure(points_cam, dirs_cam, intr: StereoIntrinsics, grads: tuple, search:
         order = np.argsort(-strength, axis=1)[:, : params.candidates]                   # (S, C)
         rows = np.arange(len(uv))[:, None]
         m0, m1, m2 = along[rows, order - 1], along[rows, order], along[rows, np.minimum(order + 1, len(steps) - 1)]
-        curvature = m0 - 2 * m1 + m2
-        sub = np.where(curvature < 0, 0.5 * (m0 - m2) / np.where(curvature < 0, curvature, -1.0), 0.0)
+        sub = parabola_peak(m0, m1, m2)
         candidates = np.where(strength[rows, order] > 0, steps[order] + np.clip(sub, -0.5, 0.5), np.nan)
         out.append((uv, normal, candidates))
     return out
@@ -186,21 +172,34 @@ def _jacobian(points_cam: np.ndarray, normal: np.ndarray, intr: StereoIntrinsics
     return np.column_stack([rotation, dpi])
 
 
+def _gradients(frame: StereoFrame, params: TrackParams, gradients: tuple | None) -> tuple[Gradients, Gradients]:
+    """The frame's (left, right) gradients: ``gradients`` if given with the blur ``params`` asks
+    for (tracking needs only gx, gy), else computed."""
+    if gradients is not None and all(g.blur_sigma == params.blur_sigma for g in gradients):
+        return gradients
+    return frame_gradients(frame, LineParams(blur_sigma=params.blur_sigma))
+
+
 def refine_pose(model: Segments, frame: StereoFrame, T_init: np.ndarray, params: TrackParams = TrackParams(),
-                grads: tuple | None = None, search_px: tuple | None = None,
+                gradients: tuple[Gradients, Gradients] | None = None, search_px: tuple | None = None,
                 tukey_px: tuple | None = None) -> PoseEstimate:
-    """Refine ``T_init`` (T_camera_object) on the frame's images against the model's accepted segments."""
+    """Refine ``T_init`` (T_camera_object, (4, 4)) on the frame's images against the model's accepted
+    segments. ``gradients``: the frame's (left, right) ``Gradients`` if already computed (e.g.
+    ``extract_frame(...).gradients``); used when their ``blur_sigma`` is ``params.blur_sigma``.
+    A 'lost' estimate that stopped early (too little in view, too few edges) keeps ``T_init``.
+    Raises ``InputError`` if ``T_init`` is not a rigid transform."""
+    T_init = check_transform(T_init, "T_init (T_camera_object)")
     intr = frame.intrinsics
-    grads = grads or (ImageGradients.of(frame.left), ImageGradients.of(frame.right))
+    grads = _gradients(frame, params, gradients)
     accepted = model.select(model.accepted) if len(model) else model
     T = T_init.copy()
     search_px, tukey_px = search_px or params.search_px, tukey_px or params.tukey_px
-    lost = PoseEstimate(T, float("inf"), 0, 0, "lost")
     points_obj = dirs_obj = None
     for search, tukey in zip(search_px, tukey_px):
         keep = visible(accepted, T, intr, params.aspect_margin_deg)
         if keep.sum() < 3:
-            return lost
+            return PoseEstimate(T_init.copy(), float("inf"), 0, 0, "lost",
+                                reason=f"{int(keep.sum())} accepted model segments in view (needs 3)")
         points_obj, dirs_obj, _ = model_samples(accepted.select(keep), params.samples_per_segment)
         P = transform_points(T, points_obj)
         D = rotate_vectors(T, dirs_obj)
@@ -214,12 +213,12 @@ def refine_pose(model: Segments, frame: StereoFrame, T_init: np.ndarray, params:
                 r_all.append(r[found])
             J, r = np.vstack(J_all), np.concatenate(r_all)
             if len(r) < 6:
-                return lost
+                return PoseEstimate(T_init.copy(), float("inf"), 0, len(r), "lost",
+                                    reason=f"{len(r)} model points found an image edge (needs 6)")
             w = np.where(np.abs(r) < tukey, (1 - (r / tukey) ** 2) ** 2, 0.0)
             H = (J * w[:, None]).T @ J + 1e-6 * np.eye(6)
             step = np.linalg.solve(H, -(J * w[:, None]).T @ r)
-            R = se3_exp(step)[:3, :3]
-            T = make_transform(R, pivot + step[3:] - R @ pivot) @ T
+            T = rotation_about_point(step[:3], pivot, step[3:]) @ T
             if np.linalg.norm(step[:3]) < 1e-5 and np.linalg.norm(step[3:]) < 1e-6:
                 break
     # final residuals at the final pose, against the finest measurements
@@ -227,9 +226,15 @@ def refine_pose(model: Segments, frame: StereoFrame, T_init: np.ndarray, params:
     r = np.abs(np.concatenate([res[found] for res, found, _ in _residuals(P, measurements, intr)]))
     inliers = r <= params.inlier_px
     rms = float(np.sqrt(np.mean(r[inliers] ** 2))) if inliers.any() else float("inf")
-    ok = (inliers.sum() >= params.min_inliers and inliers.mean() >= params.min_inlier_fraction
-          and rms <= params.max_rms_px)
-    return PoseEstimate(T, rms, int(inliers.sum()), len(r), "tracked" if ok else "lost")
+    failed = []
+    if not inliers.sum() >= params.min_inliers:
+        failed.append(f"{int(inliers.sum())} inliers (needs {params.min_inliers})")
+    if not inliers.mean() >= params.min_inlier_fraction:
+        failed.append(f"inlier fraction {inliers.mean():.2f} (needs {params.min_inlier_fraction})")
+    if not rms <= params.max_rms_px:
+        failed.append(f"RMS {rms:.2f} px (needs <= {params.max_rms_px})")
+    return PoseEstimate(T, rms, int(inliers.sum()), len(r), "lost" if failed else "tracked",
+                        reason=", ".join(failed))
 
 
 # -- re-acquisition by RANSAC over 3D-3D segment pairs -------------------------------------------------
@@ -266,22 +271,41 @@ def _pairs(segments: Segments, max_pairs: int, rng: np.random.Generator, max_spa
     return i[ok][:max_pairs], j[ok][:max_pairs]
 
 
+@dataclass
+class RansacResult:
+    """What ``ransac_pose`` found: ``pose`` the best T_camera_object (4, 4), or None with ``reason``
+    saying why; ``support`` its number of model segments landing on an extracted one (0 without a
+    pose); ``hypotheses`` up to ``keep`` distinct (T_camera_object, support) pairs, best first
+    (``pose`` is the first)."""
+
+    pose: np.ndarray | None
+    support: int
+    reason: str = ""
+    hypotheses: list = field(default_factory=list)
+
+
 def ransac_pose(model: Segments, observed: Segments, rng: np.random.Generator | None = None,
-                samples: int = 600, candidates: int = 4, keep: int = 1):
-    """The best pose T_camera_object from 3D segments of a frame (camera frame) and a model (object
-    frame), and its support (number of model segments that land on an extracted one), or (None, 0).
-    With ``keep`` > 1, a list of up to ``keep`` distinct (pose, support) pairs, best first (a
-    symmetric object has several poses of nearly equal support; the images decide)."""
+                samples: int = 600, candidates: int = 4, keep: int = 1) -> RansacResult:
+    """Poses T_camera_object from 3D segments of a frame (camera frame) and a model's accepted
+    segments (object frame), each with its support (model segments that land on an extracted one).
+    Keeps up to ``keep`` distinct poses, best first (a symmetric object has several poses of nearly
+    equal support; the images decide). Fails, with a reason, when the model or the frame has fewer
+    than 4 segments or no pair of frame segments matches a model pair."""
     rng = rng or np.random.default_rng(0)
     accepted = model.select(model.accepted)
-    if len(accepted) < 4 or len(observed) < 4:
-        return None, 0
+    if len(accepted) < 4:
+        return RansacResult(None, 0, f"the model has {len(accepted)} accepted segments (needs 4)")
+    if len(observed) < 4:
+        return RansacResult(None, 0, f"the frame has {len(observed)} extracted 3D segments (needs 4)")
     span = float(np.ptp(accepted.centers, axis=0).max()) + 0.02
     mi, mj = _pairs(accepted, 20000, rng, span)
     m_angle, m_dist, m_mid = _line_pair_invariants(accepted.centers[mi], accepted.directions[mi],
                                                    accepted.centers[mj], accepted.directions[mj])
-    table = cKDTree(np.column_stack([m_angle / 4.0, m_dist / 0.003]))
     fi, fj = _pairs(observed, samples, rng, span)
+    if len(mi) == 0 or len(fi) == 0:
+        return RansacResult(None, 0, f"no pair of {'model' if len(mi) == 0 else 'frame'} segments at 30 to 90 "
+                                     f"degrees and 1 cm to {span * 100:.0f} cm apart")
+    table = cKDTree(np.column_stack([m_angle / 4.0, m_dist / 0.003]))
     f_angle, f_dist, f_mid = _line_pair_invariants(observed.centers[fi], observed.directions[fi],
                                                    observed.centers[fj], observed.directions[fj])
     matches = table.query_ball_point(np.column_stack([f_angle / 4.0, f_dist / 0.003]), 1.0)
@@ -298,9 +322,9 @@ def ransac_pose(model: Segments, observed: Segments, rng: np.random.Generator | 
                 support = support_3d(accepted, observed, T, tree)
                 if len(found) < keep or support > found[-1][0]:
                     found = _insert_distinct(found, support, T, keep)
-    if keep == 1:
-        return (found[0][1], found[0][0]) if found else (None, 0)
-    return [(T, support) for support, T in found]
+    if not found:
+        return RansacResult(None, 0, f"none of {len(fi)} frame segment pairs matches a model pair")
+    return RansacResult(found[0][1], found[0][0], "", [(T, support) for support, T in found])
 
 
 def _insert_distinct(found: list, support: int, T: np.ndarray, keep: int) -> list:
@@ -357,6 +381,9 @@ class PoseTracker:
     history: list = field(default_factory=list)   # the last two tracked poses
     last_time_ns: int | None = None               # of the last tracked frame
 
+    def __post_init__(self):
+        check_points(self.model.centers, "model segment centres")
+
     def predict(self) -> list[np.ndarray]:
         """Starting poses: constant velocity in the camera frame, and the last pose (the motion may
         have turned back: a hand-held or swinging object often does)."""
@@ -368,18 +395,25 @@ class PoseTracker:
         return [(last @ invert(previous)) @ last, last]
 
     def update(self, frame: StereoFrame, T_guess: np.ndarray | None = None,
-               observe: Callable[[], Segments] | None = None) -> PoseEstimate:
-        """Estimate the pose in ``frame``; ``T_guess`` overrides the prediction (e.g. the first frame);
-        ``observe()`` (the frame's extracted 3D segments, asked for only when needed) enables
-        re-acquisition by RANSAC.
+               observe: Callable[[], Segments] | None = None,
+               gradients: tuple[Gradients, Gradients] | None = None) -> PoseEstimate:
+        """Estimate the pose in ``frame``; ``T_guess`` (4, 4) T_camera_object overrides the prediction
+        (e.g. the first frame); ``observe()`` (the frame's extracted 3D segments, asked for only when
+        needed) enables re-acquisition by RANSAC; ``gradients``: the frame's (left, right)
+        ``Gradients`` if already computed (pass the same to the extraction behind ``observe`` so that
+        the frame's gradients are computed once).
 
-        When the motion since the last tracked frame is unknown (after a loss, or a gap longer than
-        ``max_gap_s``: snapshots rather than video) the frame is a re-acquisition: refinement from the
-        last pose and from a RANSAC pose compete, judged by 3D support (model segments landing on the
-        frame's extracted segments), since a wrong local minimum in a cluttered image can still find
-        plenty of edges.
+        When the motion since the last tracked frame is unknown (no guess and no tracked frame yet,
+        or a gap longer than ``max_gap_s``: snapshots rather than video), or when the refinements
+        end lost, the frame is a re-acquisition (given ``observe``): the refinements and those from
+        the RANSAC poses compete, judged by 3D support (model segments landing on the frame's
+        extracted segments), since a wrong local minimum in a cluttered image can still find
+        plenty of edges. A failure is never raised: the estimate is 'lost', with its ``reason``.
+        Raises ``InputError`` if ``T_guess`` is not a rigid transform.
         """
-        grads = (ImageGradients.of(frame.left), ImageGradients.of(frame.right))
+        if T_guess is not None:
+            T_guess = check_transform(T_guess, "T_guess (T_camera_object)")
+        grads = _gradients(frame, self.params, gradients)
         gap = None if self.last_time_ns is None else (frame.timestamp_ns - self.last_time_ns) * 1e-9
         reacquiring = T_guess is None and (not self.history or gap is None or gap > self.params.max_gap_s)
         guesses = [T_guess] if T_guess is not None else self.predict()
@@ -390,9 +424,11 @@ class PoseTracker:
             wide.method = "wide"
             candidates.append(wide)
         best = max(candidates, key=_rank) if candidates else None
+        reacquisition = "" if observe is not None else "no re-acquisition (nothing to observe)"
         if (reacquiring or best is None or best.status != "tracked") and observe is not None:
             observed = observe()
-            for T, _ in ransac_pose(self.model, observed, keep=self.params.ransac_hypotheses):
+            ransac = ransac_pose(self.model, observed, keep=self.params.ransac_hypotheses)
+            for T, _ in ransac.hypotheses:
                 found = refine_pose(self.model, frame, T, self.params, grads, self.params.reacquire_search_px[1:],
                                     self.params.reacquire_tukey_px[1:])
                 found.method = "ransac"
@@ -407,8 +443,15 @@ class PoseTracker:
                                         self.params.aspect_margin_deg).sum()
                 if support < self.params.min_support_fraction * max(visible_count, 1):
                     best.status = "lost"
+                    best.reason = best.reason or (f"{support} of {visible_count} model segments in view found a "
+                                                  f"3D counterpart (needs {self.params.min_support_fraction:.0%})")
+            if ransac.reason:
+                reacquisition = f"re-acquisition: {ransac.reason}"
         if best is None:
-            best = PoseEstimate(np.full((4, 4), np.nan), float("inf"), 0, 0, "lost")
+            best = PoseEstimate(np.full((4, 4), np.nan), float("inf"), 0, 0, "lost",
+                                reason="no pose to start from (no guess, no tracked frame before)")
+        if best.status != "tracked" and reacquisition:
+            best.reason = f"{best.reason}; {reacquisition}" if best.reason else reacquisition
         if best.status == "tracked":
             self.history = (self.history + [best.T_camera_object])[-2:]
             self.last_time_ns = frame.timestamp_ns

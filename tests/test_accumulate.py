@@ -117,15 +117,57 @@ def test_expected_only_where_the_segment_should_be_seen():
     assert not kind.expected(horizontal, FrameContext(T_front, INTR))[0]  # on the critical plane
 
 
-def test_merge_trusts_each_view_across_and_keeps_the_place_along_the_line():
+def test_merge_trusts_each_view_across_and_covers_the_union_along_the_line():
     kind = LineSegmentType()
     T = make_transform(np.eye(3), [0.0, 0.0, 0.5])
     model = kind.observe(_one_segment(), FrameContext(T, INTR))
     observed = _one_segment()
-    observed.centers = np.array([[0.0003, 0.004, 0.002]])   # 2 mm deeper (uncertain), shifted along y
+    observed.centers = np.array([[0.0003, 0.004, 0.002]])   # 2 mm deeper (uncertain), 4 mm along y
     observed = kind.observe(observed, FrameContext(T, INTR))
     merged = kind.merge(model, observed, np.array([0]), np.array([0]), FrameContext(T, INTR))
     center = merged.centers[0]
     assert abs(center[2] - 0.001) < 0.0002      # depth: equal information, the average
     assert 0.0001 < center[0] < 0.0002          # across, in x: the average too
-    assert merged.lengths[0] > 0.012            # extent: the union of both pieces along y
+    # along y: the union of [-6, 6] mm and [-2, 10] mm, centred on its middle: 4 mm shift, 2 mm move
+    assert abs(center[1] - 0.002) < 1e-9 and abs(merged.lengths[0] - 0.016) < 1e-9
+
+
+def test_merge_trims_the_union_to_max_extent_at_both_ends():
+    kind = LineSegmentType()                    # max_extent 2: at most 24 mm for 12 mm observations
+    T = make_transform(np.eye(3), [0.0, 0.0, 0.5])
+    model = kind.observe(_one_segment(), FrameContext(T, INTR))
+    observed = _one_segment()
+    observed.centers = np.array([[0.0, 0.020, 0.0]])        # union [-6, 26] mm: 32 mm, trimmed by 4 at each end
+    observed = kind.observe(observed, FrameContext(T, INTR))
+    merged = kind.merge(model, observed, np.array([0]), np.array([0]), FrameContext(T, INTR))
+    assert abs(merged.centers[0, 1] - 0.010) < 1e-9 and abs(merged.lengths[0] - 0.024) < 1e-9
+
+
+def _points_run(seen_every: int, frames: int):
+    """One point, always expected, observed in frames 0 and 1 (accepted) and then in one frame out of
+    ``seen_every``: its confidence history."""
+    acc = Accumulator(PointType(), Points(np.zeros((0, 3)), np.zeros(0)), UpdateRule())
+    point = Points(np.zeros((1, 3)), np.ones(1))
+    nothing = Points(np.zeros((0, 3)), np.zeros(0))
+    history = []
+    for k in range(frames):
+        acc.update(point if k < 2 or k % seen_every == 0 else nothing, np.eye(4))
+        history.append(acc.confidence.tolist())
+    return history
+
+
+def test_update_rule_figures_of_the_module_docstring():
+    rule = UpdateRule()
+    assert abs(rule.hit - np.log(5)) < 1e-12 and abs(rule.miss - np.log(5 / 9)) < 1e-12
+    # a new entity (0.25), missed twice: 0.16, then 0.09 < floor: pruned
+    acc = Accumulator(PointType(), Points(np.zeros((0, 3)), np.zeros(0)), UpdateRule())
+    history = []
+    for k in range(3):
+        acc.update(Points(np.zeros((1 - min(k, 1), 3)), np.ones(1 - min(k, 1))), np.eye(4))
+        history.append(acc.confidence.tolist())
+    assert abs(history[0][0] - 0.25) < 1e-12 and abs(history[1][0] - 0.156) < 0.001 and history[2] == []
+    # accepted at its first confirmation: 0.625
+    assert abs(_points_run(seen_every=1, frames=2)[1][0] - 0.625) < 1e-9
+    # survives when seen in a third of the frames that should show it (break-even is 0.27), not a fifth
+    assert _points_run(seen_every=3, frames=30)[-1][0] > 0.9
+    assert _points_run(seen_every=5, frames=30)[-1] == []

@@ -61,3 +61,35 @@ def test_short_edge_is_found_by_lsd_and_hough():
             point, direction = _line_of(corners, i, (i + 1) % 4)
             found += _segments_on(segments, point, direction)[0].any()
         assert found == 4, detector.__name__
+
+
+def test_gradients_are_sobel_of_the_blurred_image_and_canny_on_the_same_integers():
+    import cv2
+
+    from accumcli.lines2d import Gradients
+
+    square, _ = rotated_square((0.0, 0.0), 0.03, 25.0, 0.5)
+    image = render_pair([square], seed=5).left
+    g = Gradients.of(image, LineParams())
+    blurred = cv2.GaussianBlur(image, (0, 0), 1.0)
+    dx, dy = cv2.Sobel(blurred, cv2.CV_16S, 1, 0, ksize=3), cv2.Sobel(blurred, cv2.CV_16S, 0, 1, ksize=3)
+    assert g.gx.dtype == np.float32 and np.array_equal(g.gx * 8, dx) and np.array_equal(g.gy * 8, dy)
+    # extraction's parts are computed on first use only (tracking needs gx, gy alone), then kept
+    assert "edges" not in g.__dict__ and "magnitude" not in g.__dict__
+    assert np.array_equal(g.edges, cv2.Canny(dx, dy, 12.0, 24.0, L2gradient=True)) and g.edges is g.edges
+    assert np.array_equal(g.magnitude, np.hypot(g.gx, g.gy))
+    assert g.edges.sum() > 0 and np.all(g.orientation_at(*np.nonzero(g.edges)) < np.pi)
+
+
+def test_parabola_peak_finds_the_vertex():
+    from accumcli.lines2d import parabola_peak
+
+    x = np.array([-1.0, 0.0, 1.0])
+    for vertex in (-0.5, -0.2, 0.0, 0.3, 0.5):
+        m = 10.0 - 3.0 * (x - vertex) ** 2
+        assert abs(parabola_peak(*m) - vertex) < 1e-12
+    # no maximum (flat or curving upwards): 0; arrays of any shape
+    assert parabola_peak(np.ones((2, 3)), np.ones((2, 3)), np.ones((2, 3))).tolist() == [[0.0] * 3] * 2
+    assert parabola_peak(np.array(2.0), np.array(1.0), np.array(2.0)) == 0.0
+    # unclipped when the centre is not the largest sample: the vertex lies beyond the samples
+    assert abs(parabola_peak(*(10.0 - (x - 1.5) ** 2)) - 1.5) < 1e-12

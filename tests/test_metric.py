@@ -51,3 +51,21 @@ def test_candidate_pairs_match_brute_force():
     ok = (d_o(da[ia], db[jb]) <= np.radians(10)) & (d_p(ca[ia], da[ia], la[ia], cb[jb], db[jb], lb[jb], S_P) <= S_P)
     assert set(zip(i.tolist(), j.tolist())) == set(zip(*np.nonzero(ok)))
     assert len(i) > 0 and np.all((cost >= 0) & (cost <= 2))
+
+
+def test_frame_accuracy_counts_near_correct_and_background():
+    from accumcli.evaluate import EdgeSamples, frame_accuracy
+    from accumcli.geometry import make_transform
+    from accumcli.model_io import Truth
+    from accumcli.segments import Segments
+
+    truth = Truth("gripper", "camera_left", np.array([[0.0, -0.05, 0.0]]), np.array([[0.0, 0.05, 0.0]]), ["edge"],
+                  [None], np.array([True]), np.zeros(0, np.int64), np.zeros((0, 4, 4)), {})   # 100 mm along y
+    edges = EdgeSamples.of(truth)
+    T = make_transform(np.eye(3), [0.0, 0.0, 0.5])
+    centres = np.array([[0.0, 0.0, 0.5], [0.002, 0.03, 0.5], [0.010, 0.0, 0.5], [0.1, 0.0, 0.5]])  # camera frame
+    on_edge = Segments("camera", centres, np.tile(Y, (4, 1)), np.full(4, 0.012), np.ones(4), np.ones(4, np.int64))
+    figures = frame_accuracy(on_edge, T, edges)
+    assert {k: figures[k] for k in ("segments", "near_object", "correct_near", "background")} == \
+        {"segments": 4, "near_object": 3, "correct_near": 2, "background": 1}
+    assert abs(figures["completeness"] - 0.24) < 1e-9        # two 12 mm pieces of a 100 mm edge

@@ -50,3 +50,33 @@ def test_slanted_edge_direction_from_global_support():
     angle = np.degrees(np.arccos(np.clip(np.abs(seg.directions[on_top] @ top), 0, 1)))
     print(f"receding edge: {on_top.sum()} segments, direction error median {np.median(angle):.2f} deg")
     assert np.median(angle) < 3.0
+
+
+def test_extraction_returns_its_gradients_and_reuses_given_ones():
+    from accumcli.lines2d import frame_gradients
+
+    square, _ = rotated_square((0.0, 0.0), 0.04, 20.0, 0.5)
+    frame = render_pair([square], seed=6)
+    first = extract_frame(frame, ExtractParams())
+    left, right = first.gradients
+    assert left.gx.shape == frame.left.shape and not np.array_equal(left.gx, right.gx)
+    given = frame_gradients(frame)
+    again = extract_frame(frame, ExtractParams(), gradients=given)
+    assert again.gradients[0] is given[0] and again.gradients[1] is given[1]
+    assert np.array_equal(again.segments.centers, first.segments.centers) and len(first.segments) >= 8
+    flat = tuple(type(g)(np.zeros_like(g.gx), np.zeros_like(g.gy), 1.0, 3.0, 1.5) for g in given)
+    assert len(extract_frame(frame, ExtractParams(), gradients=flat).segments) == 0   # they are used
+
+
+def test_given_gradients_are_reused_only_as_far_as_the_parameters_match():
+    from accumcli.lines2d import Gradients, LineParams
+
+    square, _ = rotated_square((0.0, 0.0), 0.04, 20.0, 0.5)
+    image = render_pair([square], seed=6).left
+    given = Gradients.of(image, LineParams())
+    assert Gradients.of(image, LineParams(), reuse=given) is given
+    other_threshold = Gradients.of(image, LineParams(gradient_threshold=1.0), reuse=given)
+    assert other_threshold.gx is given.gx and other_threshold.gradient_threshold == 1.0
+    assert other_threshold.edges.sum() > given.edges.sum()                 # its own Canny: the noise too
+    other_blur = Gradients.of(image, LineParams(blur_sigma=2.0), reuse=given)
+    assert other_blur.gx is not given.gx and np.abs(other_blur.gx).max() < np.abs(given.gx).max()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -16,6 +17,7 @@ from accumcli.model_io import read_truth
 from accumcli.pipeline import AccumulateParams, LineAccumulation
 from accumcli.recording import Recording
 from accumcli.segments import Segments
+from accumcli.extract import extract_frame
 from accumcli.track import PoseTracker, ransac_pose, refine_pose
 
 
@@ -82,9 +84,10 @@ def test_ransac_recovers_a_pose_from_3d_segments():
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     observed = Segments("camera", centers, dirs, np.full(len(centers), 0.012), np.ones(len(centers)),
                         np.ones(len(centers), np.int64))
-    T, support = ransac_pose(model, observed, np.random.default_rng(0))
-    rotation, translation = pose_error(T, T_true)
-    assert support >= 0.8 * keep.sum() and rotation < 1.0 and translation < 0.003
+    result = ransac_pose(model, observed, np.random.default_rng(0))
+    rotation, translation = pose_error(result.pose, T_true)
+    assert result.support >= 0.8 * keep.sum() and rotation < 1.0 and translation < 0.003
+    assert result.reason == "" and result.hypotheses[0][1] == result.support
 
 
 def test_track_command_writes_poses_json_and_mcap(noisy_pair, tmp_path):
@@ -126,3 +129,104 @@ def test_tracked_motion_repairs_noisy_gripper_poses(noisy_pair):
     assert scores["noisy"]["precision"] < scores["exact"]["precision"] - 0.02
     assert scores["repaired"]["precision"] >= scores["exact"]["precision"] - 0.03
     assert scores["repaired"]["completeness"] >= scores["exact"]["completeness"] - 0.03
+
+
+# -- failure paths: never a traceback, 'lost' with a reason ---------------------------------------------------
+def _box_model(n_side: int = 4) -> Segments:
+    """Vertical and slanted segments on the faces of a 6 cm cube (object frame), all accepted."""
+    rng = np.random.default_rng(5)
+    n = 6 * n_side
+    d = rng.normal(size=(n, 3))
+    return Segments("gripper", rng.uniform(-0.03, 0.03, (n, 3)), d / np.linalg.norm(d, axis=1, keepdims=True),
+                    np.full(n, 0.012), np.ones(n), np.ones(n, np.int64))
+
+
+def _flat_frame():
+    from accumcli.recording import StereoFrame
+
+    from .scenes import INTRINSICS
+
+    grey = np.full((INTRINSICS.height, INTRINSICS.width), 128, np.uint8)
+    return StereoFrame(0, 0, grey, grey.copy(), INTRINSICS, None)
+
+
+T_FRONT = make_transform(np.eye(3), [0.0, 0.0, 0.5])
+
+
+def test_ransac_fails_with_a_reason():
+    model = _box_model()
+    result = ransac_pose(model.select(np.arange(3)), model)
+    assert (result.pose, result.support, result.hypotheses) == (None, 0, [])
+    assert result.reason == "the model has 3 accepted segments (needs 4)"
+    assert ransac_pose(model, model.select(np.arange(2))).reason == "the frame has 2 extracted 3D segments (needs 4)"
+    parallel = model.select(np.arange(6))
+    parallel.directions = np.tile([0.0, 1.0, 0.0], (6, 1))
+    assert ransac_pose(model, parallel).reason.startswith("no pair of frame segments at 30 to 90 degrees")
+    # model pairs: perpendicular lines in one plane; frame pairs: perpendicular lines 2.1 cm apart: no match
+    grid = Segments("gripper", np.column_stack([np.arange(8) * 0.01, np.zeros(8), np.zeros(8)]),
+                    np.where((np.arange(8) % 2 == 0)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]),
+                    np.full(8, 0.012), np.ones(8), np.ones(8, np.int64))
+    skew = grid.select(np.arange(8))
+    skew.directions = np.where((np.arange(8) % 2 == 0)[:, None], [1.0, 0.0, 0.0], [0.0, 0.7071, 0.7071])
+    skew.centers[:, 2] = np.where(np.arange(8) % 2 == 0, 0.0, 0.03)
+    found = ransac_pose(grid, skew)
+    assert found.pose is None and found.reason.startswith("none of ") and \
+        found.reason.endswith(" frame segment pairs matches a model pair")
+
+
+@pytest.mark.parametrize("observed, reason", [
+    (lambda frame: extract_frame(frame).segments, "re-acquisition: the frame has 0 extracted 3D segments (needs 4)"),
+    (lambda frame: _box_model().select(np.arange(3)), "re-acquisition: the frame has 3 extracted 3D segments"),
+])
+def test_reacquisition_on_flat_grey_images_or_too_few_segments_is_lost_with_a_reason(observed, reason):
+    frame = _flat_frame()
+    tracker = PoseTracker(_box_model())
+    first = tracker.update(frame, T_FRONT, lambda: observed(frame))       # refined on flat images: no edges
+    assert first.status == "lost" and first.reason.startswith("0 model points found an image edge (needs 6)")
+    assert reason in first.reason
+    again = tracker.update(frame, None, lambda: observed(frame))         # no tracked frame: nothing to refine
+    assert again.status == "lost" and not np.isfinite(again.T_camera_object).any()
+    assert again.reason.startswith("no pose to start from") and reason in again.reason
+
+
+def test_a_model_with_no_segment_in_view_is_lost_with_a_reason():
+    frame = _flat_frame()
+    behind = make_transform(np.eye(3), [0.0, 0.0, -0.5])
+    estimate = PoseTracker(_box_model()).update(frame, behind)
+    assert estimate.status == "lost" and np.array_equal(estimate.T_camera_object, behind)
+    assert estimate.reason == ("0 accepted model segments in view (needs 3); "
+                               "no re-acquisition (nothing to observe)")
+    unaccepted = _box_model()
+    unaccepted.confidence[:] = 0.2
+    lost = PoseTracker(unaccepted).update(frame, T_FRONT, lambda: _box_model())
+    assert lost.status == "lost" and lost.reason == ("0 accepted model segments in view (needs 3); "
+                                                     "re-acquisition: the model has 0 accepted segments (needs 4)")
+
+
+def test_tracker_uses_the_gradients_it_is_given(noisy_pair, model_of_exact):
+    from accumcli.lines2d import Gradients, LineParams, frame_gradients
+
+    exact, _ = noisy_pair
+    with Recording(exact) as rec:
+        frame = next(iter(rec.frames(0, 1)))
+    given = frame_gradients(frame)
+    assert PoseTracker(model_of_exact).update(frame, frame.T_camera_object, gradients=given).status == "tracked"
+    flat = tuple(Gradients(np.zeros_like(g.gx), np.zeros_like(g.gy), 1.0, 3.0, 1.5) for g in given)
+    assert PoseTracker(model_of_exact).update(frame, frame.T_camera_object, gradients=flat).status == "lost"
+    # gradients of another blur are not what the tracker's parameters ask for: it computes its own
+    blurred = tuple(Gradients.of(image, LineParams(blur_sigma=2.0)) for image in (frame.left, frame.right))
+    for g in blurred:
+        g.gx[:] = 0
+    assert PoseTracker(model_of_exact).update(frame, frame.T_camera_object, gradients=blurred).status == "tracked"
+
+
+def test_reacquisition_without_3d_support_is_lost_with_a_reason(noisy_pair, model_of_exact):
+    exact, _ = noisy_pair
+    with Recording(exact) as rec:
+        frame = next(iter(rec.frames(0, 1)))
+    tracker = PoseTracker(model_of_exact, history=[frame.T_camera_object], last_time_ns=frame.timestamp_ns - 10**10)
+    unrelated = _box_model().transformed(make_transform(np.eye(3), [0.3, 0.3, 2.0]), "camera_left")   # 10 s gap
+    estimate = tracker.update(frame, None, lambda: unrelated)
+    assert estimate.status == "lost" and estimate.inliers >= 30     # the images agree, the 3D segments do not
+    assert re.fullmatch(r"0 of \d+ model segments in view found a 3D counterpart \(needs 20%\)"
+                        r"(; re-acquisition: .*)?", estimate.reason), estimate.reason

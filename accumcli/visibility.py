@@ -1,0 +1,39 @@
+"""The one test of whether 3D points and segments fall inside both rectified images.
+
+Accumulation (``line_model``: which model segments a frame should have shown) and
+tracking (``track``: which model segments to measure) both use it, so both mean the
+same by "in view": in front of the camera by more than ``MIN_DEPTH_M`` and, in both
+the left and the right image, at least ``IMAGE_MARGIN_PX`` inside the outermost pixel
+centres (u in [margin, width - 1 - margin], v in [margin, height - 1 - margin]).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .geometry import transform_points
+from .recording import StereoIntrinsics
+from .segments import Segments
+
+IMAGE_MARGIN_PX = 5.0   # an edge this near the border is cut by it or lost by the blur and the search
+MIN_DEPTH_M = 0.05      # nearer (or behind the camera) is not in view
+
+
+def in_both_images(points_camera: np.ndarray, intr: StereoIntrinsics, margin_px: float = IMAGE_MARGIN_PX,
+                   min_depth_m: float = MIN_DEPTH_M) -> np.ndarray:
+    """(N,) bool: ``points_camera`` (N, 3), metres, left camera frame, are deeper than
+    ``min_depth_m`` and project at least ``margin_px`` inside both images."""
+    uv_left, uv_right, z = intr.project(points_camera)
+    ok = z > min_depth_m
+    for uv in (uv_left, uv_right):
+        ok &= (uv[:, 0] >= margin_px) & (uv[:, 0] <= intr.width - 1 - margin_px) & (uv[:, 1] >= margin_px) & \
+              (uv[:, 1] <= intr.height - 1 - margin_px)
+    return ok
+
+
+def segments_in_both_images(segments: Segments, T_camera_segments: np.ndarray, intr: StereoIntrinsics,
+                            margin_px: float = IMAGE_MARGIN_PX) -> np.ndarray:
+    """(N,) bool: both endpoints of each segment (in ``segments.frame_id``, placed in the left
+    camera frame by ``T_camera_segments``) pass ``in_both_images``."""
+    ends = transform_points(T_camera_segments, segments.endpoints().reshape(-1, 3))
+    return in_both_images(ends, intr, margin_px).reshape(-1, 2).all(axis=1)
