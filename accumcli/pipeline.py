@@ -86,13 +86,14 @@ class LineAccumulation:
         extraction = extraction or self.extract(frame)
         estimate = None
         if self.params.motion == "tracked":
-            T_camera_object, estimate = self._refined(frame, T_camera_object)
+            T_camera_object, estimate = self._refined(frame, T_camera_object, extraction)
         context = FrameContext(T_camera_object, frame.intrinsics)
         stats = self.core.update(extraction.segments, invert(T_camera_object), context)
         log.debug("frame %d: %s", frame.index, ", ".join(f"{k} {v}" for k, v in stats.__dict__.items()))
         return AccumulationStep(frame, extraction, T_camera_object, stats, estimate)
 
-    def _refined(self, frame: StereoFrame, T_recorded: np.ndarray) -> tuple[np.ndarray, PoseEstimate | None]:
+    def _refined(self, frame: StereoFrame, T_recorded: np.ndarray,
+                 extraction: FrameSegments) -> tuple[np.ndarray, PoseEstimate | None]:
         p = self.params
         model = to_model(self.core.entities, self.core.confidence, self.core.observations, uncertainty=False)
         if model.accepted.sum() < p.min_tracking_segments:
@@ -102,7 +103,7 @@ class LineAccumulation:
             if len(model) < p.min_tracking_segments:
                 return T_recorded, None
         t0 = time.perf_counter()
-        estimate = refine_pose(model, frame, T_recorded, p.track)
+        estimate = refine_pose(model, frame, T_recorded, p.track, gradients=extraction.gradients)
         self.times.add("tracking", t0)
         rotation, translation = pose_error(estimate.T_camera_object, T_recorded)
         if estimate.status != "tracked" or rotation > p.max_correction_deg or translation > p.max_correction_m:

@@ -26,7 +26,9 @@ def _one_thread() -> None:
 
 def _extract(frame: StereoFrame, params: ExtractParams, camera_frame: str) -> tuple[FrameSegments, dict]:
     times = StageTimes()
-    return extract_frame(frame, params, camera_frame, times), times.seconds
+    extraction = extract_frame(frame, params, camera_frame, times)
+    extraction.gradients = None   # megabytes per frame to send back; tracking computes its own
+    return extraction, times.seconds
 
 
 def extracted_frames(frames: Iterable[StereoFrame], params: ExtractParams, camera_frame: str, workers: int,

@@ -10,6 +10,7 @@ import numpy as np
 from ..errors import AccumError
 from ..extract import ExtractParams, extract_frame
 from ..geometry import check_transform
+from ..lines2d import frame_gradients
 from ..model_io import PoseTrack, read_model, write_poses, write_poses_mcap
 from ..outputs import OutputSet
 from ..segments import Segments
@@ -82,14 +83,16 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
                     if guess is None:
                         raise AccumError(f"{recording}: the first frame has no recorded pose "
                                          f"({frame.pose_problem}); give one with --init")
-                observe = (lambda f=frame: extract_frame(f, extract_params, rec.camera_frame).segments) \
-                    if reacquire else None
-                estimate = tracker.update(frame, guess, observe)
+                shared = frame_gradients(frame, extract_params.lines)   # tracking and re-acquisition share them
+                observe = (lambda f=frame: extract_frame(f, extract_params, rec.camera_frame,
+                                                         gradients=shared).segments) if reacquire else None
+                estimate = tracker.update(frame, guess, observe, gradients=shared)
                 times.append(frame.timestamp_ns)
                 poses.append(estimate.T_camera_object)
                 status.append(estimate.status)
                 extra.append({"residual_px": round(estimate.residual_px, 4) if np.isfinite(estimate.residual_px)
-                              else None, "inliers": estimate.inliers, "method": estimate.method})
+                              else None, "inliers": estimate.inliers, "method": estimate.method,
+                              **({"reason": estimate.reason} if estimate.reason else {})})
                 if estimate.status == "tracked":
                     trajectory.append(estimate.T_camera_object[:3, 3])
                 if viz:
