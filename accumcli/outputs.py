@@ -1,0 +1,281 @@
+"""All output files of one run, written as a set.
+
+``OutputSet(paths)`` checks every output before any work starts (the folder
+exists and takes a new file, the name is not a folder and is not too long),
+hands out a temporary file per output in the output's own folder (short names
+``.accum-XXXXXXXX.tmp``, so a name of up to the file system's limit works),
+and on success renames them all onto their targets with SIGINT and SIGTERM
+blocked, so an interrupt cannot split the set. On any exception (KeyboardInterrupt
+included) it removes its temporary files and leaves the previous outputs as
+they were. A symlinked output stays a link (its target is replaced); an existing
+output keeps its mode, a new one gets 0o666 minus the umask.
+
+Usage::
+
+    with OutputSet(["out/model.json", "out/run.rrd"]) as out:
+        with out.open("out/model.json") as f:   # a text file (mode "w") or "wb"
+            f.write(...)
+        log = RerunLog(..., rrd=out.path("out/run.rrd"))   # a path for writers that open it themselves
+        ...
+    # here both files are in place, or (after an exception) neither changed
+
+Outputs never handed out (``open``/``path`` not called) are left untouched.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import os
+import signal
+import stat
+import tempfile
+from pathlib import Path
+from typing import Iterable
+
+from .errors import AccumError
+
+TEMP_PREFIX, TEMP_SUFFIX = ".accum-", ".tmp"
+BLOCKED = {signal.SIGINT, signal.SIGTERM}
+_FAULTS = {errno.ENOSPC: ("no space left on device writing {}", "free some space or write elsewhere"),
+           errno.EDQUOT: ("disk quota exceeded writing {}", "free some space or write elsewhere"),
+           errno.EROFS: ("read-only file system: cannot write {}", "write to another folder"),
+           errno.EACCES: ("permission denied writing {}", "choose a folder you can write to"),
+           errno.EPERM: ("operation not permitted writing {}", "choose a folder you can write to"),
+           errno.EFBIG: ("file too large writing {}", "write to another file system")}
+
+
+def output_error(error: OSError, path) -> AccumError | None:
+    """The one-line AccumError for an OSError a user can fix (full disk, read-only, permission)
+    while writing ``path``; None for any other error (a bug, keep its traceback)."""
+    if error.errno not in _FAULTS:
+        return None
+    what, hint = _FAULTS[error.errno]
+    return AccumError(f"{what.format(path)}; {hint}")
+
+
+def _raise_output_error(error: OSError, path):
+    fault = output_error(error, path)
+    if fault is None:
+        raise error
+    raise fault from None
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+@contextlib.contextmanager
+def signals_blocked():
+    """Hold SIGINT and SIGTERM back (they arrive when the block ends) in the calling thread."""
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, BLOCKED)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+def _raise_interrupt(signum, frame):
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+def interrupt_on_sigterm() -> None:
+    """Make SIGTERM raise KeyboardInterrupt like SIGINT does, so an OutputSet cleans up on
+    both (call once, from the main thread, e.g. at CLI start)."""
+    signal.signal(signal.SIGTERM, _raise_interrupt)
+
+
+class _GuardedFile:
+    """A file whose write errors a user can fix become AccumError naming the output."""
+
+    def __init__(self, file, name: str):
+        self._file, self._name = file, name
+
+    def write(self, data):
+        try:
+            return self._file.write(data)
+        except OSError as e:
+            _raise_output_error(e, self._name)
+
+    def writelines(self, lines):
+        for line in lines:
+            self.write(line)
+
+    def flush(self):
+        try:
+            self._file.flush()
+        except OSError as e:
+            _raise_output_error(e, self._name)
+
+    def close(self):
+        """A no-op: the OutputSet closes its files when the set is committed or abandoned."""
+
+    @property
+    def closed(self) -> bool:
+        return self._file.closed
+
+    def __getattr__(self, name):
+        return getattr(self._file, name)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return None
+
+
+class _Output:
+    """One output: what the user named, the file that is replaced (a symlink's target), its temp."""
+
+    def __init__(self, given: str):
+        self.given = given
+        self.target = Path(os.path.realpath(given)) if os.path.islink(given) else Path(given)
+        self.temp: str | None = None
+        self.file = None
+
+
+class OutputSet:
+    """Temporary files for all outputs of a run, renamed onto their targets together on success."""
+
+    def __init__(self, paths: Iterable):
+        """Check every output now (raises AccumError with one line): a file name, not a folder,
+        not given twice, short enough for its folder, in an existing folder that takes a new file."""
+        self._outputs: dict[str, _Output] = {}
+        self._done = False
+        for path in paths:
+            given = os.fspath(path)
+            if given in self._outputs:
+                raise AccumError(f"{given}: given twice as an output; give each output once")
+            self._outputs[given] = _check(_Output(given))
+        targets = [str(o.target) for o in self._outputs.values()]
+        if len(set(targets)) < len(targets):
+            raise AccumError(f"two outputs are the same file ({', '.join(self._outputs)}); give each output once")
+
+    @property
+    def paths(self) -> list[str]:
+        """The outputs as given, in order."""
+        return list(self._outputs)
+
+    def _output(self, path) -> _Output:
+        key = os.fspath(path)
+        if self._done:
+            raise RuntimeError(f"{key}: the output set is already finished")
+        if key not in self._outputs:
+            raise KeyError(f"{key} is not an output of this set ({', '.join(self._outputs)})")
+        return self._outputs[key]
+
+    def path(self, path) -> str:
+        """The temporary path standing for output ``path`` (created empty, mode 0o600, in the
+        target's folder); whatever is there at commit replaces the target."""
+        out = self._output(path)
+        if out.temp is None:
+            try:
+                fd, out.temp = tempfile.mkstemp(prefix=TEMP_PREFIX, suffix=TEMP_SUFFIX, dir=out.target.parent)
+            except OSError as e:
+                _raise_output_error(e, out.given)
+            os.close(fd)
+        return out.temp
+
+    def open(self, path, mode: str = "w"):
+        """The temporary file for output ``path`` opened for writing (``"w"``: UTF-8 text,
+        ``"wb"``: binary). Write errors a user can fix (full disk...) raise AccumError naming
+        ``path``. Closing it is optional: the set flushes and closes it at the end."""
+        if mode not in ("w", "wb"):
+            raise ValueError(f"mode {mode!r}: expected 'w' or 'wb'")
+        out = self._output(path)
+        if out.file is not None:
+            raise RuntimeError(f"{out.given} is already open")
+        temp = self.path(path)
+        raw = open(temp, mode, encoding="utf-8" if mode == "w" else None)
+        out.file = _GuardedFile(raw, out.given)
+        return out.file
+
+    def commit(self) -> None:
+        """Flush, fsync and close every file handed out, then rename every temp onto its target
+        with SIGINT/SIGTERM held back. Called by ``__exit__`` when the block ends without error."""
+        used = [o for o in self._outputs.values() if o.temp is not None]
+        mask = _umask()
+        for out in used:
+            try:
+                if out.file is not None and not out.file.closed:
+                    out.file.flush()
+                    os.fsync(out.file.fileno())
+                    out.file._file.close()
+                try:
+                    mode = stat.S_IMODE(os.stat(out.target).st_mode)
+                except FileNotFoundError:
+                    mode = 0o666 & ~mask
+                os.chmod(out.temp, mode)
+            except OSError as e:
+                _raise_output_error(e, out.given)
+        with signals_blocked():
+            for out in used:
+                try:
+                    os.replace(out.temp, out.target)
+                except OSError as e:
+                    _raise_output_error(e, out.given)
+                out.temp = None
+            self._done = True
+
+    def abandon(self) -> None:
+        """Close and remove every temporary file; the targets stay as they were."""
+        with signals_blocked():
+            for out in self._outputs.values():
+                if out.file is not None:
+                    with contextlib.suppress(OSError):
+                        out.file._file.close()
+                if out.temp is not None:
+                    with contextlib.suppress(FileNotFoundError):
+                        os.unlink(out.temp)
+                    out.temp = None
+            self._done = True
+
+    def __enter__(self) -> "OutputSet":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            try:
+                self.commit()
+            except BaseException:
+                self.abandon()
+                raise
+            return
+        self.abandon()
+        if isinstance(exc, OSError):
+            name = next((o.given for o in self._outputs.values()
+                         if exc.filename is not None and exc.filename in (o.temp, o.given, str(o.target))), None)
+            fault = output_error(exc, name or ", ".join(self._outputs))
+            if fault is not None:
+                raise fault from None
+
+
+def _check(out: _Output) -> _Output:
+    """``out`` if it can be written; AccumError saying why not (tried with a real temporary file)."""
+    given, target = out.given, out.target
+    if given.endswith(os.sep) or target.is_dir():
+        raise AccumError(f"{given}: is a folder; give a file name")
+    folder = target.parent
+    if not folder.is_dir():
+        what = "is not a folder" if folder.exists() else "does not exist"
+        raise AccumError(f"{given}: the folder {folder} {what}; create it or write elsewhere")
+    try:
+        limit = os.pathconf(folder, "PC_NAME_MAX")
+    except (OSError, ValueError):
+        limit = 255
+    if len(os.fsencode(target.name)) > limit:
+        raise AccumError(f"{given}: the file name is {len(os.fsencode(target.name))} bytes, more than the "
+                         f"{limit} its folder allows; give a shorter name")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=TEMP_PREFIX, suffix=TEMP_SUFFIX, dir=folder)
+    except OSError as e:
+        fault = output_error(e, given)
+        if fault is None:
+            raise
+        raise AccumError(f"{given}: cannot create a file in {folder} ({os.strerror(e.errno)}); "
+                         "choose a folder you can write to") from None
+    os.close(fd)
+    os.unlink(probe)
+    return out
