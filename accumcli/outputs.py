@@ -255,11 +255,11 @@ class OutputSet:
 def _check(out: _Output) -> _Output:
     """``out`` if it can be written; AccumError saying why not (tried with a real temporary file)."""
     given, target = out.given, out.target
-    if given.endswith(os.sep) or target.is_dir():
+    if given.endswith(os.sep) or os.path.isdir(target):
         raise AccumError(f"{given}: is a folder; give a file name")
     folder = target.parent
-    if not folder.is_dir():
-        what = "is not a folder" if folder.exists() else "does not exist"
+    if not os.path.isdir(folder):
+        what = "is not a folder" if os.path.exists(folder) else "does not exist"
         raise AccumError(f"{given}: the folder {folder} {what}; create it or write elsewhere")
     try:
         limit = os.pathconf(folder, "PC_NAME_MAX")
