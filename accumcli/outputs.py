@@ -30,6 +30,7 @@ import os
 import signal
 import stat
 import tempfile
+import threading
 from pathlib import Path
 from typing import Iterable
 
@@ -69,12 +70,27 @@ def _umask() -> int:
 
 @contextlib.contextmanager
 def signals_blocked():
-    """Hold SIGINT and SIGTERM back (they arrive when the block ends) in the calling thread."""
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, BLOCKED)
+    """Hold SIGINT and SIGTERM back until the block ends, then deliver them.
+
+    ``pthread_sigmask`` blocks them in the calling thread; in a process with other
+    threads (Rerun's, thread pools) the kernel may deliver them to another thread,
+    so in the main thread their Python handlers are also replaced by one that notes
+    the signal, and the noted signals are raised again once the handlers are back."""
+    held = []
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in BLOCKED:
+            if signal.getsignal(sig) is not None:  # None: a handler not set from Python, left alone
+                previous[sig] = signal.signal(sig, lambda signum, frame: held.append(signum))
+    old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, BLOCKED)
     try:
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        for sig in dict.fromkeys(held):
+            signal.raise_signal(sig)
 
 
 def _raise_interrupt(signum, frame):

@@ -6,6 +6,7 @@ import builtins
 import errno
 import os
 import signal
+import threading
 
 import pytest
 
@@ -143,7 +144,12 @@ def test_new_file_mode_follows_the_umask(tmp_path):
     assert ((tmp_path / "run.rrd").stat().st_mode & 0o777) == 0o640
 
 
-def test_interrupt_during_the_renames_does_not_split_the_set(tmp_path, monkeypatch):
+@pytest.mark.parametrize("other_thread", [False, True])
+def test_interrupt_during_the_renames_does_not_split_the_set(tmp_path, monkeypatch, other_thread):
+    # With another thread alive the kernel hands it the signal the main thread blocks.
+    stop = threading.Event()
+    if other_thread:
+        threading.Thread(target=stop.wait, daemon=True).start()
     paths = [tmp_path / f"{i}.json" for i in range(3)]
     replace = os.replace
     calls = []
@@ -155,10 +161,15 @@ def test_interrupt_during_the_renames_does_not_split_the_set(tmp_path, monkeypat
             os.kill(os.getpid(), signal.SIGINT)  # held back until all three are renamed
 
     monkeypatch.setattr(outputs.os, "replace", replace_then_interrupt)
-    with pytest.raises(KeyboardInterrupt):
-        with OutputSet(paths) as out:
-            for p in paths:
-                out.open(p).write("new")
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # other tests' libraries replace it
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with OutputSet(paths) as out:
+                for p in paths:
+                    out.open(p).write("new")
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        stop.set()
     assert len(calls) == 3 and all(p.read_text() == "new" for p in paths)
     assert names(tmp_path) == ["0.json", "1.json", "2.json"]
 
