@@ -299,7 +299,10 @@ class FramesWriter:
 
 
 def read_frames(path) -> Iterator[tuple[int, Segments, dict]]:
-    """(timestamp_ns, segments, the line's other keys) for each line of a frames JSONL file."""
+    """(timestamp_ns, segments, the line's other keys) for each line of a frames JSONL file
+    (an empty file has no frames)."""
+    if file_kind(path) == "empty":
+        return
     check_kind(path, "frames")
     with open(path, "rb") as f:
         for number, raw in enumerate(f, 1):

@@ -46,6 +46,9 @@ _FAULTS = {errno.ENOSPC: ("no space left on device writing {}", "free some space
            errno.EFBIG: ("file too large writing {}", "write to another file system")}
 
 
+_NO_ROOM = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+
+
 def output_error(error: OSError, path) -> AccumError | None:
     """The one-line AccumError for an OSError a user can fix (full disk, read-only, permission)
     while writing ``path``; None for any other error (a bug, keep its traceback)."""
@@ -259,11 +262,14 @@ class OutputSet:
                 self.abandon()
                 raise
             return
+        temps = {o.given: o.temp for o in self._outputs.values()}
         self.abandon()
         if isinstance(exc, OSError):
-            name = next((o.given for o in self._outputs.values()
-                         if exc.filename is not None and exc.filename in (o.temp, o.given, str(o.target))), None)
-            fault = output_error(exc, name or ", ".join(self._outputs))
+            name = next((o.given for o in self._outputs.values() if exc.filename is not None
+                         and os.fspath(exc.filename) in (temps[o.given], o.given, str(o.target))), None)
+            if name is None and exc.filename is None and exc.errno in _NO_ROOM:
+                name = ", ".join(self._outputs)  # a full disk while a writer of ours wrote (no file named)
+            fault = output_error(exc, name) if name is not None else None
             if fault is not None:
                 raise fault from None
 

@@ -269,6 +269,10 @@ def test_bad_model_files(tmp_path, content, message):
         read_model(tmp_path / "bad.json")
 
 
+def test_empty_frames_file_has_no_frames(files):
+    assert list(read_frames(files["empty"])) == []
+
+
 def test_bad_frames_line(tmp_path):
     good = dumps({"format": "accum.model/1", "timestamp_ns": 1, "frame_id": "c", "segments": []})
     (tmp_path / "f.jsonl").write_bytes((good + "\n" + good.replace('"timestamp_ns":1', '"timestamp_ns":"x"')

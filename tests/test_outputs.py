@@ -112,6 +112,18 @@ def test_full_disk_while_writing(tmp_path, monkeypatch):
     assert target.read_text() == "old" and names(tmp_path) == ["model.json"]
 
 
+def test_other_os_errors_are_not_taken_for_output_faults(tmp_path):
+    with pytest.raises(PermissionError, match="secret.mcap"):  # reading an input: not ours to rename
+        with OutputSet([tmp_path / "m.json"]) as out:
+            out.open(tmp_path / "m.json")
+            raise PermissionError(errno.EACCES, "Permission denied", str(tmp_path / "secret.mcap"))
+    with pytest.raises(AccumError, match=r"^no space left on device writing .*m\.json; "):
+        with OutputSet([tmp_path / "m.json"]) as out:
+            out.path(tmp_path / "m.json")
+            raise OSError(errno.ENOSPC, "No space left on device")  # e.g. from a writer given out.path()
+    assert names(tmp_path) == []
+
+
 def test_output_error_messages():
     assert str(output_error(OSError(errno.ENOSPC, "x"), "a.rrd")) == \
         "no space left on device writing a.rrd; free some space or write elsewhere"
