@@ -13,6 +13,7 @@ models) KILLS times, each killed after a random delay with SIGINT, SIGTERM or SI
 - the exit status after SIGINT or SIGTERM is 130, with no traceback on stderr.
 
 Not part of the tests. Usage: python benchmarks/interrupt.py [--kills 20] [--seed 0]
+[--accum "python -m accumcli.cli"] (the command to run instead of the console script).
 Exit status 1 when any check failed.
 """
 
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import random
+import shlex
 import shutil
 import signal
 import subprocess
@@ -34,7 +36,10 @@ OUTPUTS = ("model.json", "model.ply")
 SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGKILL)
 
 
-def accum() -> str:
+ACCUM: list[str] = []  # the command that runs accum, set in main()
+
+
+def console_script() -> str:
     beside = Path(sys.executable).with_name("accum")
     found = str(beside) if beside.exists() else shutil.which("accum")
     if found is None:
@@ -43,7 +48,7 @@ def accum() -> str:
 
 
 def command(folder: Path, stop: int) -> list[str]:
-    return [accum(), "accumulate", str(RECORDING), "-o", str(folder / OUTPUTS[0]), "-o", str(folder / OUTPUTS[1]),
+    return [*ACCUM, "accumulate", str(RECORDING), "-o", str(folder / OUTPUTS[0]), "-o", str(folder / OUTPUTS[1]),
             "--frames", f"0:{stop}"]
 
 
@@ -71,7 +76,9 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--kills", type=int, default=20)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--accum", help="command running accum (default: the installed console script)")
     args = parser.parse_args()
+    ACCUM[:] = shlex.split(args.accum) if args.accum else [console_script()]
     rng = random.Random(args.seed)
     references, durations = {}, {}
     for stop in (7, 8):
