@@ -1,22 +1,26 @@
 """All output files of one run, written as a set.
 
 ``OutputSet(paths)`` checks every output before any work starts (the folder
-exists and takes a new file, the name is not a folder and is not too long),
-hands out a temporary file per output in the output's own folder (short names
-``.accum-XXXXXXXX.tmp``, so a name of up to the file system's limit works),
-and on success renames them all onto their targets with SIGINT and SIGTERM
-blocked, so an interrupt cannot split the set. On any exception (KeyboardInterrupt
-included) it removes its temporary files and leaves the previous outputs as
-they were. A symlinked output stays a link (its target is replaced); an existing
-output keeps its mode, a new one gets 0o666 minus the umask.
+exists and takes a new file, tried with a real one; the name is not a folder,
+not given twice and not too long), hands out a temporary file per output in the
+folder of the file it replaces (short names ``.accum-XXXXXXXX.tmp``, so any name
+the file system allows works), and on success renames them all onto their
+targets with SIGINT and SIGTERM held back (``signals_blocked``), so an interrupt
+cannot split the set; only a rename that fails although the start-up probe
+succeeded could. On any exception (KeyboardInterrupt and SystemExit included) it
+removes its temporary files and leaves the previous outputs as they were. A full
+disk, a read-only file system or a refused permission while writing an output
+becomes a one-line AccumError naming it. A symlinked output stays a link (its
+target is replaced); an existing output keeps its mode, a new one gets 0o666
+minus the umask.
 
 Usage::
 
-    with OutputSet(["out/model.json", "out/run.rrd"]) as out:
-        with out.open("out/model.json") as f:   # a text file (mode "w") or "wb"
-            f.write(...)
-        log = RerunLog(..., rrd=out.path("out/run.rrd"))   # a path for writers that open it themselves
+    with OutputSet(["out/model.json", "out/run.rrd"]) as out:   # checks here, before the work
+        log = RerunLog(..., rrd=out.path("out/run.rrd"))  # a path, for writers that open the file
         ...
+        log.close()
+        write_model(out.open("out/model.json"), model)     # an open file ("w" UTF-8 text or "wb")
     # here both files are in place, or (after an exception) neither changed
 
 Outputs never handed out (``open``/``path`` not called) are left untouched.
@@ -168,7 +172,7 @@ class OutputSet:
             if given in self._outputs:
                 raise AccumError(f"{given}: given twice as an output; give each output once")
             self._outputs[given] = _check(_Output(given))
-        targets = [str(o.target) for o in self._outputs.values()]
+        targets = [os.path.abspath(o.target) for o in self._outputs.values()]
         if len(set(targets)) < len(targets):
             raise AccumError(f"two outputs are the same file ({', '.join(self._outputs)}); give each output once")
 

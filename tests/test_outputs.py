@@ -75,6 +75,9 @@ def test_checked_before_any_work(tmp_path, make, message):
 def test_given_twice(tmp_path):
     with pytest.raises(AccumError, match="m.json: given twice as an output; give each output once"):
         OutputSet([str(tmp_path / "m.json"), str(tmp_path / "m.json")])
+    (tmp_path / "sub").mkdir()
+    with pytest.raises(AccumError, match=r"two outputs are the same file"):
+        OutputSet([str(tmp_path / "m.json"), str(tmp_path / "." / "sub" / ".." / "m.json")])
     (tmp_path / "real.json").write_text("")
     (tmp_path / "link.json").symlink_to(tmp_path / "real.json")
     with pytest.raises(AccumError, match=r"two outputs are the same file"):
