@@ -11,9 +11,9 @@ from plyfile import PlyData
 
 from accumcli.errors import AccumError, FileFormatError
 from accumcli.geometry import make_transform
-from accumcli.model_io import (FramesWriter, PoseTrack, check_kind, confidence_rgb, dumps, file_kind,
-                               read_frames, read_model, read_poses, read_truth, write_json_lines, write_model,
-                               write_ply, write_poses, write_poses_mcap)
+from accumcli.model_io import (FramesWriter, PoseTrack, check_kind, confidence_rgb, describe_kind, dumps,
+                               file_kind, read_frames, read_model, read_poses, read_truth, write_json,
+                               write_json_lines, write_model, write_ply, write_poses, write_poses_mcap)
 from accumcli.outputs import OutputSet
 from accumcli.segments import Segments
 
@@ -229,6 +229,19 @@ def test_file_kind_by_content(files):
         "model": "model", "ply": "ply", "frames": "frames", "one frame": "frames", "poses": "poses",
         "truth": "truth", "recording": "recording", "empty": "empty", "binary": "binary", "latin-1": "binary",
         "text": "text", "json": "json"}
+
+
+def test_file_kind_of_long_and_pretty_files(tmp_path, files):
+    big = random_segments(600)
+    write_model(tmp_path / "big.json", big)
+    with FramesWriter(tmp_path / "big.jsonl") as w:
+        w.write(big, 1)
+    assert (tmp_path / "big.json").stat().st_size > 65536
+    assert file_kind(tmp_path / "big.json") == "model" and file_kind(tmp_path / "big.jsonl") == "frames"
+    write_json(tmp_path / "pretty.json", json.loads((tmp_path / "big.json").read_text()), indent=2)
+    assert file_kind(tmp_path / "pretty.json") == "model" and len(read_model(tmp_path / "pretty.json")) == 600
+    assert describe_kind(files["json"]) == "a JSON file of format 'other/2'"
+    assert describe_kind(files["ply"]) == "a PLY file"
 
 
 @pytest.mark.parametrize("reader, given, message", [
