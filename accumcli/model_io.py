@@ -148,8 +148,9 @@ def _sniff(path) -> tuple[str, str | None]:
 
 def file_kind(path) -> str:
     """The kind of file at ``path``, by content (never by name alone): one of KIND_NAMES'
-    keys. 'frames' is a file of JSON lines tagged accum.model/1 with a ``timestamp_ns``
-    (or more than one such line); 'json' any other JSON-looking text. The name's
+    keys, from the first 64 KiB (magic bytes; for JSON the first ``"format"`` tag, which
+    accum writes first). 'frames' is a file of JSON lines tagged accum.model/1 with a
+    ``timestamp_ns`` (or more than one such line); 'json' any other JSON-looking text. The name's
     '.jsonl' decides between model and frames only when the first line is longer than
     the part read (64 KiB) and the tag alone cannot tell."""
     return _sniff(path)[0]
