@@ -1,34 +1,38 @@
-"""Atomic file output: write to a temporary file beside the target, then rename.
-
-An interrupted run never leaves half a file; the target is either the old one
-or the complete new one.
+"""Atomic output of one file: the single-file case of ``outputs.OutputSet`` (same checks,
+short temporary name in the same folder, symlink and mode kept, temp removed on any
+exception, rename with SIGINT/SIGTERM held back). An interrupted run never leaves half
+a file: the target is either the old one or the complete new one.
 """
 
 from __future__ import annotations
 
 import contextlib
-import os
-import tempfile
-from pathlib import Path
 
-from .errors import AccumError
+from .outputs import OutputSet
 
 
 @contextlib.contextmanager
 def atomic_open(path, mode: str = "w"):
-    """Open a temporary file for writing; on success it replaces ``path``."""
-    target = Path(path)
-    if not target.parent.is_dir():
-        raise AccumError(f"{target}: the folder {target.parent} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
-    try:
-        with os.fdopen(fd, mode) as f:
+    """A file (``"w"`` UTF-8 text or ``"wb"``) whose content replaces ``path`` when the block
+    ends without error; raises AccumError when ``path`` cannot be written."""
+    with OutputSet([path]) as out:
+        yield out.open(path, mode)
+
+
+@contextlib.contextmanager
+def atomic_path(path):
+    """A temporary path (in ``path``'s folder) for writers that open the file themselves;
+    whatever is there when the block ends without error replaces ``path``."""
+    with OutputSet([path]) as out:
+        yield out.path(path)
+
+
+@contextlib.contextmanager
+def opened(target, mode: str = "w"):
+    """``target`` itself if it is an open file (e.g. from ``OutputSet.open``; left open),
+    else ``atomic_open(target, mode)``."""
+    if hasattr(target, "write"):
+        yield target
+    else:
+        with atomic_open(target, mode) as f:
             yield f
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, target)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise

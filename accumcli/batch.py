@@ -25,7 +25,7 @@ from pathlib import Path
 
 from .atomic import atomic_open
 from .errors import AccumError, InputError
-from .model_io import dumps_strict
+from .model_io import dumps
 from .pipeline import AccumulateParams
 from .runs import FrameRange, RecordingOptions, accumulate_recording, evaluate_file, track_recording
 
@@ -94,7 +94,7 @@ def run_task(recording: str, outdir: str, options: BatchOptions) -> dict:
             if options.track:
                 figures["poses"] = evaluate_file(str(folder / "poses.json"), str(truth))
             with atomic_open(folder / "eval.json") as f:
-                f.write(dumps_strict(figures, indent=1) + "\n")
+                f.write(dumps(figures, indent=1) + "\n")
             row.update({k: round(figures[k], 4) for k in ("precision", "completeness", "background")
                         if isinstance(figures.get(k), float) and math.isfinite(figures[k])})
         with atomic_open(done) as f:

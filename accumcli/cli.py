@@ -440,7 +440,7 @@ def eval_(inputs, poses, as_json, position_tol, angle_tol, background_dist, min_
       accum eval out/model.json sample_data/sim_box.truth.json
     """
     from .evaluate import Tolerances
-    from .model_io import dumps_strict
+    from .model_io import dumps
     from .report import figures_lines
     from .runs import evaluate_file
 
@@ -449,7 +449,7 @@ def eval_(inputs, poses, as_json, position_tol, angle_tol, background_dist, min_
         raise click.UsageError("expected INPUT TRUTH.json (INPUT: a model, frames or poses file)")
     tol = Tolerances(position_tol / 1000.0, angle_tol, background_dist / 1000.0, min_seen)
     figures = evaluate_file(inputs[0], inputs[1], tol, frames, support_face)
-    click.echo(dumps_strict(figures, indent=1) if as_json else "\n".join(figures_lines(figures)))
+    click.echo(dumps(figures, indent=1) if as_json else "\n".join(figures_lines(figures)))
 
 
 if __name__ == "__main__":

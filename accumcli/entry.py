@@ -3,16 +3,13 @@ left as they were) from the first moment, before the heavy imports of the comman
 
 from __future__ import annotations
 
-import signal
 import sys
 
 
-def _interrupt(signum, frame):
-    raise KeyboardInterrupt
-
-
 def main() -> None:
-    signal.signal(signal.SIGTERM, _interrupt)
+    from .outputs import interrupt_on_sigterm   # the standard library and errors.py only
+
+    interrupt_on_sigterm()
     try:
         from .cli import main as cli_main
     except KeyboardInterrupt:

@@ -1,9 +1,13 @@
 """Files of accum (formats.md sections 2-4): models (JSON, PLY), per-frame
-segments (JSONL), poses (JSON) and ground-truth sidecars (JSON).
+segments (JSONL), poses (JSON, MCAP) and ground-truth sidecars (JSON).
 
-Every output is written atomically. Readers check the ``format`` tag and the
-fields they need, and raise ``FileFormatError`` naming the file and the
-problem; fields they do not know are ignored (and kept in ``extra``).
+Writers take a path (written atomically, ``atomic.atomic_open``) or a file
+opened by an ``outputs.OutputSet``. All JSON is strict: NaN and infinities
+are written as ``null`` (``dumps``). Readers recognise their input by its
+content first (``file_kind``) and refuse another kind with ``FileFormatError``
+("x.ply: expected a model JSON (accum.model/1), got a PLY file"); then they
+check the fields they need; fields they do not know are ignored (and kept in
+``extra``).
 """
 
 from __future__ import annotations
@@ -11,12 +15,13 @@ from __future__ import annotations
 import contextlib
 import json
 import math
+import re
 from dataclasses import dataclass, field
-from typing import Iterator
+from typing import Iterable, Iterator
 
 import numpy as np
 
-from .atomic import atomic_open
+from .atomic import opened
 from .errors import FileFormatError
 from .geometry import quat_from_transform, transform_from_quat
 from .segments import Segments
@@ -25,8 +30,164 @@ MODEL_FORMAT = "accum.model/1"
 POSES_FORMAT = "accum.poses/1"
 TRUTH_FORMAT = "accum.truth/1"
 CORE_FIELDS = ("center", "direction", "length", "confidence", "observations")
+POSES_TOPIC = "/accum/poses"
+TRACKED_SUFFIX = "_tracked"
+
+# file_kind results and how messages name them
+KIND_NAMES = {"model": f"a model JSON ({MODEL_FORMAT})", "frames": f"a frames JSONL file ({MODEL_FORMAT} lines)",
+              "poses": f"a poses JSON ({POSES_FORMAT})", "truth": f"a truth JSON ({TRUTH_FORMAT})",
+              "ply": "a PLY file", "recording": "an MCAP recording", "json": "a JSON file of another kind",
+              "text": "a text file", "binary": "a binary file", "empty": "an empty file"}
+SNIFF_BYTES = 65536
 
 
+# -- strict JSON -------------------------------------------------------------------------------
+def _json_default(value):
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, (np.floating, np.integer)):
+        return value.item()
+    raise TypeError(f"Object of type {type(value).__name__} is not JSON serializable")
+
+
+def _finite(value):
+    """``value`` with every non-finite float replaced by None (numpy values made plain)."""
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _finite(value.tolist())
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    return value
+
+
+def dumps(obj, indent: int | None = None) -> str:
+    """Strict JSON of ``obj`` (dicts, lists, numbers, numpy scalars and arrays): NaN and
+    +-inf become ``null``, never the bare ``NaN``/``Infinity`` that JSON parsers reject.
+    Compact separators unless ``indent`` is given."""
+    separators = (",", ":") if indent is None else None
+    try:
+        return json.dumps(obj, indent=indent, separators=separators, allow_nan=False, default=_json_default)
+    except ValueError:  # a non-finite float somewhere
+        return json.dumps(_finite(obj), indent=indent, separators=separators, allow_nan=False,
+                          default=_json_default)
+
+
+def write_json(target, obj, indent: int | None = None) -> None:
+    """``obj`` as strict JSON (``dumps``) and a newline, to a path (atomically) or an open text file."""
+    with opened(target) as f:
+        f.write(dumps(obj, indent) + "\n")
+
+
+def write_json_lines(target, rows: Iterable) -> None:
+    """One strict JSON line per row (e.g. accumulation history), to a path (atomically) or an open text file."""
+    with opened(target) as f:
+        for row in rows:
+            f.write(dumps(row) + "\n")
+
+
+# -- recognising files -------------------------------------------------------------------------
+_FORMAT_TAG = re.compile(rb'"format"\s*:\s*"([^"\\]{0,100})"')
+
+
+def _head(path) -> bytes:
+    try:
+        with open(path, "rb") as f:
+            return f.read(SNIFF_BYTES)
+    except FileNotFoundError:
+        raise FileFormatError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise FileFormatError(f"{path}: is a folder, expected a file") from None
+    except PermissionError:
+        raise FileFormatError(f"{path}: permission denied; check the file's permissions") from None
+
+
+def _is_text(head: bytes) -> bool:
+    if b"\0" in head:
+        return False
+    try:
+        head.decode("utf-8")
+    except UnicodeDecodeError as e:
+        return e.start >= len(head) - 3 and len(head) == SNIFF_BYTES  # a character cut by the sniff
+    return True
+
+
+def _sniff(path) -> tuple[str, str | None]:
+    """(kind, the format tag if a JSON file has one)."""
+    head = _head(path)
+    if not head.strip():
+        return "empty", None
+    if head.startswith(b"\x89MCAP"):
+        return "recording", None
+    if head.startswith((b"ply\n", b"ply\r\n")):
+        return "ply", None
+    if not _is_text(head):
+        return "binary", None
+    text = head.lstrip()
+    if not text.startswith((b"{", b"[")):
+        return "text", None
+    tag = _FORMAT_TAG.search(head)
+    tag = tag.group(1).decode("utf-8", "replace") if tag else None
+    kind = {MODEL_FORMAT: "model", POSES_FORMAT: "poses", TRUTH_FORMAT: "truth"}.get(tag, "json")
+    if kind == "model":
+        first, newline, rest = text.partition(b"\n")
+        try:
+            doc = json.loads(first)
+        except ValueError:
+            if newline:  # a pretty-printed model, several lines per document
+                return "model", tag
+            return ("frames" if str(path).endswith(".jsonl") else "model"), tag
+        if isinstance(doc, dict) and ("timestamp_ns" in doc or rest.strip()):
+            return "frames", tag
+    return kind, tag
+
+
+def file_kind(path) -> str:
+    """The kind of file at ``path``, by content (never by name alone): one of KIND_NAMES'
+    keys, from the first 64 KiB (magic bytes; for JSON the first ``"format"`` tag, which
+    accum writes first). 'frames' is a file of JSON lines tagged accum.model/1 with a
+    ``timestamp_ns`` (or more than one such line); 'json' any other JSON-looking text. The name's
+    '.jsonl' decides between model and frames only when the first line is longer than
+    the part read (64 KiB) and the tag alone cannot tell."""
+    return _sniff(path)[0]
+
+
+def describe_kind(path) -> str:
+    """How messages name the kind of file at ``path`` ("a PLY file", "a JSON file of format 'x'", ...)."""
+    return _kind_name(*_sniff(path))
+
+
+def _kind_name(kind: str, tag: str | None) -> str:
+    return f"a JSON file of format {tag!r}" if kind == "json" and tag else KIND_NAMES[kind]
+
+
+def check_kind(path, *expected: str) -> str:
+    """``file_kind(path)`` if it is one of ``expected``, else FileFormatError
+    "x.ply: expected a model JSON (accum.model/1), got a PLY file"."""
+    kind, tag = _sniff(path)
+    if kind not in expected:
+        wanted = " or ".join(KIND_NAMES[k] for k in expected)
+        raise FileFormatError(f"{path}: expected {wanted}, got {_kind_name(kind, tag)}")
+    return kind
+
+
+def _load_json(path, kind: str):
+    """The JSON document of a file that ``check_kind`` recognises as ``kind``."""
+    check_kind(path, kind)
+    try:
+        with open(path, "rb") as f:
+            return json.loads(f.read().decode("utf-8"))
+    except UnicodeDecodeError as e:
+        raise FileFormatError(f"{path}: byte {e.start} is not UTF-8 text; expected {KIND_NAMES[kind]}") from None
+    except json.JSONDecodeError as e:
+        raise FileFormatError(f"{path}: not valid JSON ({e}); expected {KIND_NAMES[kind]}") from None
+
+
+# -- models ------------------------------------------------------------------------------------
 def _round(values: np.ndarray, digits: int) -> list:
     return np.round(values, digits).tolist()
 
@@ -59,7 +220,7 @@ def segments_from_dict(doc: dict, where: str) -> Segments:
         lengths = np.array([r.get("length", 0.0) for r in rows], float)
         confidence = np.array([r.get("confidence", 1.0) for r in rows], float)
         observations = np.array([r.get("observations", 1) for r in rows], np.int64)
-    except (KeyError, TypeError, ValueError) as e:
+    except (KeyError, TypeError, ValueError, AttributeError) as e:
         raise FileFormatError(f"{where}: malformed segment ({type(e).__name__}: {e})") from None
     if len(centers) != len(rows) or not (np.isfinite(centers).all() and np.isfinite(directions).all()):
         raise FileFormatError(f"{where}: segments need finite 3-vectors 'center' and 'direction'")
@@ -74,60 +235,62 @@ def segments_from_dict(doc: dict, where: str) -> Segments:
     return Segments(frame_id, centers, directions / norms[:, None], lengths, confidence, observations, extra)
 
 
-def _load_json(path, what: str):
-    try:
-        with open(path) as f:
-            return json.load(f)
-    except FileNotFoundError:
-        raise FileFormatError(f"{path}: no such {what} file") from None
-    except IsADirectoryError:
-        raise FileFormatError(f"{path}: is a folder, expected a {what} file") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise FileFormatError(f"{path}: not a JSON {what} file ({e})") from None
-
-
-def write_model(path, segments: Segments, **header) -> None:
-    """Write the model JSON (formats.md section 2) atomically."""
-    with atomic_open(path) as f:
-        json.dump(segments_to_dict(segments, **header), f, separators=(",", ":"))
-        f.write("\n")
+def write_model(target, segments: Segments, **header) -> None:
+    """The model JSON (formats.md section 2; strict, one line) to a path (atomically) or an open text file."""
+    write_json(target, segments_to_dict(segments, **header))
 
 
 def read_model(path) -> Segments:
+    """The segments of a model JSON; FileFormatError for any other kind of file or a malformed model."""
     return segments_from_dict(_load_json(path, "model"), str(path))
 
 
-def write_ply(path, segments: Segments, all_segments: bool = False) -> None:
-    """Binary PLY line set: 2N vertices (float x, y, z endpoints), N edges with a float confidence;
-    the accepted segments only unless ``all_segments``."""
-    if not all_segments:
-        segments = segments.select(segments.accepted)
-    n = len(segments)
-    header = (f"ply\nformat binary_little_endian 1.0\ncomment accum model, frame {segments.frame_id}\n"
+def confidence_rgb(confidence: np.ndarray) -> np.ndarray:
+    """(N, 3) uint8 RGB by confidence (N,): red at 0, yellow at 0.5 (the decision line), green at 1."""
+    c = np.clip(np.nan_to_num(np.asarray(confidence, float)), 0.0, 1.0)
+    return np.rint(np.column_stack([np.minimum(1, 2 * (1 - c)), np.minimum(1, 2 * c), np.zeros_like(c)])
+                   * 255).astype(np.uint8)
+
+
+def write_ply(target, segments: Segments, all_segments: bool = False) -> None:
+    """The model as an ASCII PLY line set, to a path (atomically) or an open text file.
+
+    Accepted segments only (confidence >= 0.5), every one with ``all_segments``.
+    ``element vertex`` (2 per segment: its endpoints): float x, y, z (metres, in
+    ``frame_id``), uchar red, green, blue (``confidence_rgb``); ``element edge``:
+    int vertex1, vertex2, float confidence, uchar red, green, blue. ASCII, because
+    trimesh reads binary edges as one (n, k) array and refuses k > 2, while it
+    takes ASCII edges by their names; Open3D (``read_line_set``, which takes the
+    edge colours) and plyfile read either.
+    """
+    kept = segments if all_segments else segments.select(segments.accepted)
+    n = len(kept)
+    header = (f"ply\nformat ascii 1.0\ncomment accum model, frame {kept.frame_id}, "
+              f"{'all segments' if all_segments else 'accepted segments (confidence >= 0.5)'}\n"
               f"element vertex {2 * n}\nproperty float x\nproperty float y\nproperty float z\n"
+              "property uchar red\nproperty uchar green\nproperty uchar blue\n"
               f"element edge {n}\nproperty int vertex1\nproperty int vertex2\nproperty float confidence\n"
-              "end_header\n").encode()
-    vertices = segments.endpoints().reshape(-1, 3).astype("<f4")
-    edges = np.zeros(n, dtype=[("v1", "<i4"), ("v2", "<i4"), ("c", "<f4")])
-    edges["v1"] = 2 * np.arange(n)
-    edges["v2"] = 2 * np.arange(n) + 1
-    edges["c"] = segments.confidence
-    with atomic_open(path, "wb") as f:
+              "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n")
+    rgb = confidence_rgb(kept.confidence)
+    vertices = np.column_stack([kept.endpoints().reshape(-1, 3), np.repeat(rgb, 2, axis=0)])
+    edges = np.column_stack([2 * np.arange(n), 2 * np.arange(n) + 1, np.nan_to_num(kept.confidence), rgb])
+    with opened(target) as f:
         f.write(header)
-        f.write(vertices.tobytes())
-        f.write(edges.tobytes())
+        np.savetxt(f, vertices, fmt="%.7g %.7g %.7g %d %d %d")
+        np.savetxt(f, edges, fmt="%d %d %.5g %d %d %d")
 
 
+# -- frames ------------------------------------------------------------------------------------
 class FramesWriter:
-    """Streams one JSON line per stereo frame to ``path`` (atomic: appears on close)."""
+    """Streams one strict JSON line per stereo frame to a path (atomic: appears on close
+    without error) or to an open text file (e.g. from ``OutputSet.open``)."""
 
-    def __init__(self, path):
+    def __init__(self, target):
         self._stack = contextlib.ExitStack()
-        self._file = self._stack.enter_context(atomic_open(path))
+        self._file = self._stack.enter_context(opened(target))
 
     def write(self, segments: Segments, timestamp_ns: int, **extra) -> None:
-        doc = segments_to_dict(segments, timestamp_ns=int(timestamp_ns), **extra)
-        self._file.write(json.dumps(doc, separators=(",", ":")) + "\n")
+        self._file.write(dumps(segments_to_dict(segments, timestamp_ns=int(timestamp_ns), **extra)) + "\n")
 
     def __enter__(self) -> "FramesWriter":
         return self
@@ -137,30 +300,35 @@ class FramesWriter:
 
 
 def read_frames(path) -> Iterator[tuple[int, Segments, dict]]:
-    """(timestamp_ns, segments, the line's other keys) for each line of a frames JSONL file."""
-    try:
-        f = open(path)
-    except (FileNotFoundError, IsADirectoryError):
-        raise FileFormatError(f"{path}: no such frames file") from None
-    with f:
-        for number, line in enumerate(f, 1):
+    """(timestamp_ns, segments, the line's other keys) for each line of a frames JSONL file
+    (an empty file has no frames)."""
+    if file_kind(path) == "empty":
+        return
+    check_kind(path, "frames")
+    with open(path, "rb") as f:
+        for number, raw in enumerate(f, 1):
+            where = f"{path}, line {number}"
+            try:
+                line = raw.decode("utf-8")
+            except UnicodeDecodeError as e:
+                raise FileFormatError(f"{where}: not UTF-8 text (byte {e.start})") from None
             if not line.strip():
                 continue
-            where = f"{path}, line {number}"
             try:
                 doc = json.loads(line)
             except json.JSONDecodeError as e:
                 raise FileFormatError(f"{where}: not JSON ({e})") from None
             segments = segments_from_dict(doc, where)
-            if "timestamp_ns" not in doc:
-                raise FileFormatError(f"{where}: expected 'timestamp_ns'")
-            yield int(doc["timestamp_ns"]), segments, {k: v for k, v in doc.items() if k not in ("segments",)}
+            if not isinstance(doc.get("timestamp_ns"), int):
+                raise FileFormatError(f"{where}: expected an integer 'timestamp_ns'")
+            yield doc["timestamp_ns"], segments, {k: v for k, v in doc.items() if k != "segments"}
 
 
 # -- poses -------------------------------------------------------------------------------------
 @dataclass
 class PoseTrack:
-    """Poses ``T_parent_child`` over time: times_ns (N,) int64, poses (N, 4, 4); status and extra per pose."""
+    """Poses ``T_parent_child`` over time: times_ns (N,) int64, poses (N, 4, 4) (NaN where
+    there is none); status ("tracked", "lost", ...) and a dict of extra fields per pose."""
 
     parent_frame_id: str
     child_frame_id: str
@@ -168,6 +336,11 @@ class PoseTrack:
     poses: np.ndarray
     status: list = field(default_factory=list)
     extra: list = field(default_factory=list)
+
+    def tracked(self) -> np.ndarray:
+        """(N,) bool: status "tracked" (every pose when there is no status) and a finite pose."""
+        ok = np.isfinite(self.poses).all(axis=(1, 2))
+        return ok & np.array([s == "tracked" for s in self.status], bool) if self.status else ok
 
 
 def _pose_rows(doc: dict, where: str) -> tuple[np.ndarray, np.ndarray, list]:
@@ -178,7 +351,7 @@ def _pose_rows(doc: dict, where: str) -> tuple[np.ndarray, np.ndarray, list]:
         times = np.array([int(r["timestamp_ns"]) for r in rows], np.int64)
         poses = np.stack([transform_from_quat(r["translation"], r["rotation_xyzw"]) for r in rows]) if rows \
             else np.zeros((0, 4, 4))
-    except (KeyError, TypeError, ValueError) as e:
+    except (KeyError, TypeError, ValueError, AttributeError) as e:
         raise FileFormatError(f"{where}: malformed pose ({type(e).__name__}: {e})") from None
     return times, poses, rows
 
@@ -188,7 +361,9 @@ def _pose_dict(t_ns: int, T: np.ndarray) -> dict:
     return {"timestamp_ns": int(t_ns), "translation": _round(translation, 9), "rotation_xyzw": _round(quat, 9)}
 
 
-def write_poses(path, track: PoseTrack, **header) -> None:
+def write_poses(target, track: PoseTrack, **header) -> None:
+    """The poses JSON (formats.md section 3; strict), to a path (atomically) or an open text file.
+    A non-finite pose is written with ``translation`` and ``rotation_xyzw`` null."""
     rows = []
     for i, (t_ns, T) in enumerate(zip(track.times_ns, track.poses)):
         row = _pose_dict(t_ns, T) if np.isfinite(T).all() else {"timestamp_ns": int(t_ns), "translation": None,
@@ -198,32 +373,44 @@ def write_poses(path, track: PoseTrack, **header) -> None:
         rows.append(row)
     doc = {"format": POSES_FORMAT, "parent_frame_id": track.parent_frame_id,
            "child_frame_id": track.child_frame_id, **header, "poses": rows}
-    with atomic_open(path) as f:
-        json.dump(doc, f, indent=1, allow_nan=False, default=_json_default)
-        f.write("\n")
+    write_json(target, doc, indent=1)
 
 
-def _json_default(value):
-    if isinstance(value, (np.floating, np.integer)):
-        return value.item() if math.isfinite(value) else None
-    raise TypeError(type(value).__name__)
+def write_poses_mcap(target, track: PoseTrack, topic: str = POSES_TOPIC, child_frame_id: str | None = None) -> int:
+    """The tracked poses (``PoseTrack.tracked``) as ``foxglove.FrameTransform`` messages
+    ``parent_frame_id -> child_frame_id`` on ``topic``, to a path (atomically) or an open
+    binary file; returns the number written. ``child_frame_id`` defaults to the track's
+    child + "_tracked" (e.g. gripper_tracked), so that beside the recording in Foxglove it
+    neither replaces the recording's /tf nor gives its object frame a second parent."""
+    from .recording.writer import RecordingWriter
+
+    child = child_frame_id if child_frame_id is not None else track.child_frame_id + TRACKED_SUFFIX
+    keep = track.tracked()
+    with RecordingWriter(target) as writer:
+        for t_ns, T in zip(track.times_ns[keep], track.poses[keep]):
+            writer.transform(track.parent_frame_id, child, T, int(t_ns), topic=topic)
+    return int(keep.sum())
 
 
 def read_poses(path) -> PoseTrack:
+    """A poses JSON; null poses become NaN (4, 4) matrices."""
     doc = _load_json(path, "poses")
     if not isinstance(doc, dict) or doc.get("format") != POSES_FORMAT:
         raise FileFormatError(f"{path}: expected format {POSES_FORMAT!r}")
     rows = doc.get("poses")
-    if not isinstance(rows, list):
-        raise FileFormatError(f"{path}: expected a list under 'poses'")
+    if not isinstance(rows, list) or not all(isinstance(r, dict) for r in rows):
+        raise FileFormatError(f"{path}: expected a list of objects under 'poses'")
     times, poses, status = [], [], []
-    for r in rows:
-        times.append(int(r.get("timestamp_ns", 0)))
-        status.append(r.get("status", "tracked"))
-        if r.get("translation") is None or r.get("rotation_xyzw") is None:
-            poses.append(np.full((4, 4), np.nan))
-        else:
-            poses.append(transform_from_quat(r["translation"], r["rotation_xyzw"]))
+    try:
+        for r in rows:
+            times.append(int(r.get("timestamp_ns", 0)))
+            status.append(r.get("status", "tracked"))
+            if r.get("translation") is None or r.get("rotation_xyzw") is None:
+                poses.append(np.full((4, 4), np.nan))
+            else:
+                poses.append(transform_from_quat(r["translation"], r["rotation_xyzw"]))
+    except (TypeError, ValueError) as e:
+        raise FileFormatError(f"{path}: malformed pose ({type(e).__name__}: {e})") from None
     return PoseTrack(doc.get("parent_frame_id", ""), doc.get("child_frame_id", ""), np.array(times, np.int64),
                      np.array(poses).reshape(-1, 4, 4), status, rows)
 
@@ -258,8 +445,8 @@ def read_truth(path) -> Truth:
     if not isinstance(doc, dict) or doc.get("format") != TRUTH_FORMAT:
         raise FileFormatError(f"{path}: expected format {TRUTH_FORMAT!r}")
     edges = doc.get("edges")
-    if not isinstance(edges, list) or not edges:
-        raise FileFormatError(f"{path}: expected a non-empty list under 'edges'")
+    if not isinstance(edges, list) or not edges or not all(isinstance(e, dict) for e in edges):
+        raise FileFormatError(f"{path}: expected a non-empty list of objects under 'edges'")
     try:
         a = np.array([e["a"] for e in edges], float).reshape(-1, 3)
         b = np.array([e["b"] for e in edges], float).reshape(-1, 3)
@@ -272,56 +459,3 @@ def read_truth(path) -> Truth:
                  [e.get("kind", "") for e in edges], seen,
                  np.array([bool(e.get("completeness", True)) for e in edges]), times, poses,
                  {k: v for k, v in doc.items() if k not in ("edges", "poses")})
-
-
-def file_kind(path) -> str:
-    """'recording', 'frames', 'model', 'poses' or 'truth', from the file's magic bytes or format tag."""
-    try:
-        with open(path, "rb") as f:
-            head = f.read(4096)
-    except (FileNotFoundError, IsADirectoryError):
-        raise FileFormatError(f"{path}: no such file") from None
-    if head.startswith(b"\x89MCAP"):
-        return "recording"
-    text = head.decode("utf-8", "replace")
-    for tag, kind in ((MODEL_FORMAT, "model"), (POSES_FORMAT, "poses"), (TRUTH_FORMAT, "truth")):
-        if tag in text:
-            if kind == "model" and str(path).endswith(".jsonl"):
-                return "frames"
-            return kind
-    raise FileFormatError(f"{path}: not a recording, model, frames, poses or truth file of accum")
-
-
-def write_json_lines(path, rows) -> None:
-    """One strict JSON object per line (NaN and infinities as null)."""
-    with atomic_open(path) as f:
-        for row in rows:
-            f.write(dumps_strict(row) + "\n")
-
-
-def write_poses_mcap(path, track: PoseTrack, topic: str = "/accum/poses", child_frame: str | None = None) -> None:
-    """The tracked poses of ``track`` as FrameTransforms on ``topic`` (child ``child_frame``)."""
-    from .recording import RecordingWriter
-
-    child = child_frame or f"{track.child_frame_id}_tracked"
-    with RecordingWriter(path) as writer:
-        for t_ns, T, status in zip(track.times_ns, track.poses, track.status):
-            if status == "tracked":
-                writer.transform(track.parent_frame_id, child, T, int(t_ns), topic=topic)
-
-
-def _finite_or_none(value):
-    if isinstance(value, dict):
-        return {k: _finite_or_none(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_finite_or_none(v) for v in value]
-    if isinstance(value, (float, np.floating)):
-        return float(value) if math.isfinite(value) else None
-    if isinstance(value, np.integer):
-        return int(value)
-    return value
-
-
-def dumps_strict(doc, **kwargs) -> str:
-    """JSON text of ``doc`` with NaN and infinities as null (strict parsers reject bare NaN)."""
-    return json.dumps(_finite_or_none(doc), allow_nan=False, **kwargs)

@@ -1,34 +1,310 @@
-"""Interim stand-in for the output set (being replaced): checks folders up front, writes each
-output to a temporary name, renames all at the end, removes temporaries on failure."""
+"""All output files of one run, written as a set.
+
+``OutputSet(paths)`` checks every output before any work starts (the folder
+exists and takes a new file, tried with a real one; the name is not a folder,
+not given twice and not too long), hands out a temporary file per output in the
+folder of the file it replaces (short names ``.accum-XXXXXXXX.tmp``, so any name
+the file system allows works), and on success renames them all onto their
+targets with SIGINT and SIGTERM held back (``signals_blocked``), so an interrupt
+cannot split the set; only a rename that fails although the start-up probe
+succeeded could. On any exception (KeyboardInterrupt and SystemExit included) it
+removes its temporary files and leaves the previous outputs as they were. A full
+disk, a read-only file system or a refused permission while writing an output
+becomes a one-line AccumError naming it. A symlinked output stays a link (its
+target is replaced); an existing output keeps its mode, a new one gets 0o666
+minus the umask.
+
+Usage::
+
+    with OutputSet(["out/model.json", "out/run.rrd"]) as out:   # checks here, before the work
+        log = RerunLog(..., rrd=out.path("out/run.rrd"))  # a path, for writers that open the file
+        ...
+        log.close()
+        write_model(out.open("out/model.json"), model)     # an open file ("w" UTF-8 text or "wb")
+    # here both files are in place, or (after an exception) neither changed
+
+Outputs never handed out (``open``/``path`` not called) are left untouched.
+"""
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
+import signal
+import stat
+import tempfile
+import threading
 from pathlib import Path
+from typing import Iterable
 
 from .errors import AccumError
 
+TEMP_PREFIX, TEMP_SUFFIX = ".accum-", ".tmp"
+BLOCKED = {signal.SIGINT, signal.SIGTERM}
+_FAULTS = {errno.ENOSPC: ("no space left on device writing {}", "free some space or write elsewhere"),
+           errno.EDQUOT: ("disk quota exceeded writing {}", "free some space or write elsewhere"),
+           errno.EROFS: ("read-only file system: cannot write {}", "write to another folder"),
+           errno.EACCES: ("permission denied writing {}", "choose a folder you can write to"),
+           errno.EPERM: ("operation not permitted writing {}", "choose a folder you can write to"),
+           errno.EFBIG: ("file too large writing {}", "write to another file system")}
 
-class OutputSet:
-    def __init__(self, paths):
-        self.targets = [Path(p) for p in paths if p]
-        for t in self.targets:
-            if not t.parent.is_dir():
-                raise AccumError(f"{t}: the folder {t.parent} does not exist")
-        self._temps = {t: t.parent / f".accum-{os.getpid()}-{i}.tmp" for i, t in enumerate(self.targets)}
 
-    def path(self, target) -> str:
-        return str(self._temps[Path(target)])
+_NO_ROOM = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+
+
+def output_error(error: OSError, path) -> AccumError | None:
+    """The one-line AccumError for an OSError a user can fix (full disk, read-only, permission)
+    while writing ``path``; None for any other error (a bug, keep its traceback)."""
+    if error.errno not in _FAULTS:
+        return None
+    what, hint = _FAULTS[error.errno]
+    return AccumError(f"{what.format(path)}; {hint}")
+
+
+def _raise_output_error(error: OSError, path):
+    fault = output_error(error, path)
+    if fault is None:
+        raise error
+    raise fault from None
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+@contextlib.contextmanager
+def signals_blocked():
+    """Hold SIGINT and SIGTERM back until the block ends, then deliver them.
+
+    ``pthread_sigmask`` blocks them in the calling thread; in a process with other
+    threads (Rerun's, thread pools) the kernel may deliver them to another thread,
+    so in the main thread their Python handlers are also replaced by one that notes
+    the signal, and the noted signals are raised again once the handlers are back."""
+    held = []
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in BLOCKED:
+            if signal.getsignal(sig) is not None:  # None: a handler not set from Python, left alone
+                previous[sig] = signal.signal(sig, lambda signum, frame: held.append(signum))
+    old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, BLOCKED)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        for sig in dict.fromkeys(held):
+            signal.raise_signal(sig)
+
+
+def _raise_interrupt(signum, frame):
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+def interrupt_on_sigterm() -> None:
+    """Make SIGTERM raise KeyboardInterrupt like SIGINT does, so an OutputSet cleans up on
+    both (call once, from the main thread, e.g. at CLI start)."""
+    signal.signal(signal.SIGTERM, _raise_interrupt)
+
+
+class _GuardedFile:
+    """A file whose write errors a user can fix become AccumError naming the output."""
+
+    def __init__(self, file, name: str):
+        self._file, self._name = file, name
+
+    def write(self, data):
+        try:
+            return self._file.write(data)
+        except OSError as e:
+            _raise_output_error(e, self._name)
+
+    def writelines(self, lines):
+        for line in lines:
+            self.write(line)
+
+    def flush(self):
+        try:
+            self._file.flush()
+        except OSError as e:
+            _raise_output_error(e, self._name)
+
+    def close(self):
+        """A no-op: the OutputSet closes its files when the set is committed or abandoned."""
+
+    @property
+    def closed(self) -> bool:
+        return self._file.closed
+
+    def __getattr__(self, name):
+        return getattr(self._file, name)
 
     def __enter__(self):
         return self
 
-    def __exit__(self, exc_type, exc, tb):
+    def __exit__(self, *exc):
+        return None
+
+
+class _Output:
+    """One output: what the user named, the file that is replaced (a symlink's target), its temp."""
+
+    def __init__(self, given: str):
+        self.given = given
+        self.target = Path(os.path.realpath(given)) if os.path.islink(given) else Path(given)
+        self.temp: str | None = None
+        self.file = None
+
+
+class OutputSet:
+    """Temporary files for all outputs of a run, renamed onto their targets together on success."""
+
+    def __init__(self, paths: Iterable):
+        """Check every output now (raises AccumError with one line): a file name, not a folder,
+        not given twice, short enough for its folder, in an existing folder that takes a new file.
+        None entries (outputs not asked for) are skipped."""
+        self._outputs: dict[str, _Output] = {}
+        self._done = False
+        for path in paths:
+            if path is None or path == "":
+                continue   # an output not asked for
+            given = os.fspath(path)
+            if given in self._outputs:
+                raise AccumError(f"{given}: given twice as an output; give each output once")
+            self._outputs[given] = _check(_Output(given))
+        targets = [os.path.abspath(o.target) for o in self._outputs.values()]
+        if len(set(targets)) < len(targets):
+            raise AccumError(f"two outputs are the same file ({', '.join(self._outputs)}); give each output once")
+
+    @property
+    def paths(self) -> list[str]:
+        """The outputs as given, in order."""
+        return list(self._outputs)
+
+    def _output(self, path) -> _Output:
+        key = os.fspath(path)
+        if self._done:
+            raise RuntimeError(f"{key}: the output set is already finished")
+        if key not in self._outputs:
+            raise KeyError(f"{key} is not an output of this set ({', '.join(self._outputs)})")
+        return self._outputs[key]
+
+    def path(self, path) -> str:
+        """The temporary path standing for output ``path`` (created empty, mode 0o600, in the
+        target's folder); whatever is there at commit replaces the target."""
+        out = self._output(path)
+        if out.temp is None:
+            try:
+                fd, out.temp = tempfile.mkstemp(prefix=TEMP_PREFIX, suffix=TEMP_SUFFIX, dir=out.target.parent)
+            except OSError as e:
+                _raise_output_error(e, out.given)
+            os.close(fd)
+        return out.temp
+
+    def open(self, path, mode: str = "w"):
+        """The temporary file for output ``path`` opened for writing (``"w"``: UTF-8 text,
+        ``"wb"``: binary). Write errors a user can fix (full disk...) raise AccumError naming
+        ``path``. Closing it is optional: the set flushes and closes it at the end."""
+        if mode not in ("w", "wb"):
+            raise ValueError(f"mode {mode!r}: expected 'w' or 'wb'")
+        out = self._output(path)
+        if out.file is not None:
+            raise RuntimeError(f"{out.given} is already open")
+        temp = self.path(path)
+        raw = open(temp, mode, encoding="utf-8" if mode == "w" else None)
+        out.file = _GuardedFile(raw, out.given)
+        return out.file
+
+    def commit(self) -> None:
+        """Flush, fsync and close every file handed out, then rename every temp onto its target
+        with SIGINT/SIGTERM held back. Called by ``__exit__`` when the block ends without error."""
+        used = [o for o in self._outputs.values() if o.temp is not None]
+        mask = _umask()
+        for out in used:
+            try:
+                if out.file is not None and not out.file.closed:
+                    out.file.flush()
+                    os.fsync(out.file.fileno())
+                    out.file._file.close()
+                try:
+                    mode = stat.S_IMODE(os.stat(out.target).st_mode)
+                except FileNotFoundError:
+                    mode = 0o666 & ~mask
+                os.chmod(out.temp, mode)
+            except OSError as e:
+                _raise_output_error(e, out.given)
+        with signals_blocked():
+            for out in used:
+                try:
+                    os.replace(out.temp, out.target)
+                except OSError as e:
+                    _raise_output_error(e, out.given)
+                out.temp = None
+            self._done = True
+
+    def abandon(self) -> None:
+        """Close and remove every temporary file; the targets stay as they were."""
+        with signals_blocked():
+            for out in self._outputs.values():
+                if out.file is not None:
+                    with contextlib.suppress(OSError):
+                        out.file._file.close()
+                if out.temp is not None:
+                    with contextlib.suppress(FileNotFoundError):
+                        os.unlink(out.temp)
+                    out.temp = None
+            self._done = True
+
+    def __enter__(self) -> "OutputSet":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
         if exc_type is None:
-            for t, tmp in self._temps.items():
-                if tmp.exists():
-                    os.replace(tmp, t)
-        for tmp in self._temps.values():
-            with contextlib.suppress(FileNotFoundError):
-                tmp.unlink()
+            try:
+                self.commit()
+            except BaseException:
+                self.abandon()
+                raise
+            return
+        temps = {o.given: o.temp for o in self._outputs.values()}
+        self.abandon()
+        if isinstance(exc, OSError):
+            name = next((o.given for o in self._outputs.values() if exc.filename is not None
+                         and os.fspath(exc.filename) in (temps[o.given], o.given, str(o.target))), None)
+            if name is None and exc.filename is None and exc.errno in _NO_ROOM:
+                name = ", ".join(self._outputs)  # a full disk while a writer of ours wrote (no file named)
+            fault = output_error(exc, name) if name is not None else None
+            if fault is not None:
+                raise fault from None
+
+
+def _check(out: _Output) -> _Output:
+    """``out`` if it can be written; AccumError saying why not (tried with a real temporary file)."""
+    given, target = out.given, out.target
+    if given.endswith(os.sep) or os.path.isdir(target):
+        raise AccumError(f"{given}: is a folder; give a file name")
+    folder = target.parent
+    if not os.path.isdir(folder):
+        what = "is not a folder" if os.path.exists(folder) else "does not exist"
+        raise AccumError(f"{given}: the folder {folder} {what}; create it or write elsewhere")
+    try:
+        limit = os.pathconf(folder, "PC_NAME_MAX")
+    except (OSError, ValueError):
+        limit = 255
+    if len(os.fsencode(target.name)) > limit:
+        raise AccumError(f"{given}: the file name is {len(os.fsencode(target.name))} bytes, more than the "
+                         f"{limit} its folder allows; give a shorter name")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=TEMP_PREFIX, suffix=TEMP_SUFFIX, dir=folder)
+    except OSError as e:
+        fault = output_error(e, given)
+        if fault is None:
+            raise
+        raise AccumError(f"{given}: cannot create a file in {folder} ({os.strerror(e.errno)}); "
+                         "choose a folder you can write to") from None
+    os.close(fd)
+    os.unlink(probe)
+    return out

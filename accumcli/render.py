@@ -12,7 +12,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .atomic import atomic_open
+from .atomic import opened
 from .errors import AccumError
 from .geometry import make_transform, transform_points
 
@@ -175,10 +175,10 @@ def render_frame_panel(frame, result, model, T_camera_object: np.ndarray) -> np.
     return np.hstack([panels[0], gap, panels[1], gap, panels[2]])
 
 
-def write_png(path, image: np.ndarray) -> None:
-    """Write ``image`` (H, W) or (H, W, 3) BGR uint8 as a PNG, atomically."""
+def write_png(target, image: np.ndarray) -> None:
+    """Write ``image`` (H, W) or (H, W, 3) BGR uint8 as a PNG to a path (atomically) or an open binary file."""
     ok, data = cv2.imencode(".png", image)
     if not ok:
-        raise AccumError(f"{path}: could not encode the image as PNG")
-    with atomic_open(path, "wb") as f:
+        raise AccumError(f"{target}: could not encode the image as PNG")
+    with opened(target, "wb") as f:
         f.write(data.tobytes())

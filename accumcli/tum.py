@@ -10,15 +10,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from .atomic import atomic_open
+from .atomic import opened
 from .geometry import quat_from_transform
 
 
 def write_poses_tum(path, track, only_tracked: bool = True) -> int:
-    """Write ``track`` (a ``PoseTrack``) as TUM; returns the number of poses written."""
+    """Write ``track`` (a ``PoseTrack``) as TUM to a path (atomically) or an open text file; returns
+    the number of poses written."""
     keep = [i for i, T in enumerate(track.poses) if np.isfinite(T).all()
             and (not only_tracked or not track.status or track.status[i] == "tracked")]
-    with atomic_open(path) as f:
+    with opened(path) as f:
         f.write(f"# accum poses: T_{track.parent_frame_id}_{track.child_frame_id}; timestamp tx ty tz qx qy qz qw\n")
         for i in keep:
             translation, quat = quat_from_transform(track.poses[i])

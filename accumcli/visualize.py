@@ -17,16 +17,24 @@ frame for ``accumulate``; optical axes, ``ViewCoordinates.RDF``)::
 Timelines: ``frame`` (sequence: the frame index) and ``time`` (timestamp).
 Rerun puts pixel centres at half-integers, accum at integers (see the package
 docstring), so 2D overlays and the principal point are shifted by +0.5 px.
+Images are logged as JPEG (quality ``JPEG_QUALITY``), so an .rrd stays near the
+size of the recording.
 """
 
 from __future__ import annotations
 
+import os
+import shutil
+import sys
 import uuid
+from pathlib import Path
 
+import cv2
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from .errors import AccumError
 from .geometry import invert, transform_points
 
 PIXEL = 0.5  # accum pixel (u, v) + PIXEL = rerun pixel coordinate
@@ -34,6 +42,30 @@ MATCHED, UNMATCHED = (40, 200, 60), (255, 140, 0)  # RGB of 2D segments with / w
 FRAME_SEGMENTS = (230, 90, 30)
 ACCUMULATE_STATS = ("size", "accepted", "confirmed", "new", "pruned", "precision", "completeness", "background")
 KINDS = ("extract", "accumulate", "track", "view")
+JPEG_QUALITY = 85
+
+
+def jpeg(image: np.ndarray) -> rr.EncodedImage:
+    """An (H, W) grey or (H, W, 3) BGR uint8 image as a JPEG ``rr.EncodedImage``."""
+    ok, data = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+    if not ok:
+        raise ValueError(f"could not encode a {image.shape} {image.dtype} image as JPEG")
+    return rr.EncodedImage(contents=data.tobytes(), media_type="image/jpeg")
+
+
+def viewer_executable() -> str:
+    """The Rerun viewer to spawn: ``rerun`` beside this Python (its venv) or on PATH.
+    AccumError "cannot start the Rerun viewer ...; use --rrd" when there is none, or
+    (on Linux) when neither DISPLAY nor WAYLAND_DISPLAY is set."""
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise AccumError("cannot start the Rerun viewer: no display (DISPLAY and WAYLAND_DISPLAY are unset); "
+                         "use --rrd and open the file where there is one")
+    beside = Path(sys.executable).with_name("rerun")
+    found = str(beside) if beside.is_file() and os.access(beside, os.X_OK) else shutil.which("rerun")
+    if found is None:
+        raise AccumError("cannot start the Rerun viewer: no 'rerun' executable beside this Python or on PATH; "
+                         "use --rrd (or install rerun-sdk where the viewer can run)")
+    return found
 
 
 def blueprint(kind: str) -> rrb.Blueprint:
@@ -64,17 +96,22 @@ class RerunLog:
 
     def __init__(self, app: str, rrd: str | None = None, kind: str = "view", spawn: bool = False,
                  connect: str | None = None):
-        """``app``: application id; exactly one of ``rrd`` (file path, works headless),
-        ``spawn`` (start a viewer) or ``connect`` (gRPC URL, e.g.
-        ``rerun+http://127.0.0.1:9876/proxy``)."""
+        """``app``: application id; exactly one of ``rrd`` (file path, works headless; give
+        ``OutputSet.path(...)`` to make the .rrd part of a run's atomic set), ``spawn``
+        (start a viewer; AccumError from ``viewer_executable`` where none can run) or
+        ``connect`` (gRPC URL, e.g. ``rerun+http://127.0.0.1:9876/proxy``)."""
         if (rrd is not None) + bool(spawn) + (connect is not None) != 1:
             raise ValueError("RerunLog needs exactly one sink: rrd, spawn or connect")
         layout = blueprint(kind)
+        executable = viewer_executable() if spawn else None
         self.rec = rr.RecordingStream(app, recording_id=uuid.uuid4())
         if rrd is not None:
             self.rec.save(str(rrd))
         elif spawn:
-            self.rec.spawn()
+            try:
+                rr.spawn(executable_path=executable, recording=self.rec)
+            except Exception as e:  # the viewer failed to start (rerun raises RuntimeError and others)
+                raise AccumError(f"cannot start the Rerun viewer ({type(e).__name__}: {e}); use --rrd") from None
         else:
             self.rec.connect_grpc(connect)
         self.rec.send_blueprint(layout)
@@ -96,9 +133,9 @@ class RerunLog:
                                                 camera_xyz=rr.ViewCoordinates.RDF))
 
     def images(self, frame) -> None:
-        """The rectified left image on ``world/camera/image``, the right one on ``images/right``."""
-        self.rec.log("world/camera/image", rr.Image(frame.left))
-        self.rec.log("images/right", rr.Image(frame.right))
+        """The rectified left image on ``world/camera/image``, the right one on ``images/right``, as JPEG."""
+        self.rec.log("world/camera/image", jpeg(frame.left))
+        self.rec.log("images/right", jpeg(frame.right))
 
     def segments_2d(self, result) -> None:
         """2D segments of a ``FrameSegments`` in both images; those that became 3D segments in MATCHED colour."""
@@ -193,3 +230,9 @@ class RerunLog:
         """Flush everything to the sink and detach from it (an .rrd is complete afterwards)."""
         self.rec.flush()
         self.rec.disconnect()
+
+    def __enter__(self) -> "RerunLog":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

@@ -3,12 +3,18 @@ with the SDK's own reader. Never spawns or connects to a viewer."""
 
 from __future__ import annotations
 
+import sys
+
+import cv2
 import numpy as np
 import pytest
 from rerun.chunk import RrdReader
 
+from accumcli import visualize
 from accumcli.accumulate import StepStats
+from accumcli.errors import AccumError
 from accumcli.geometry import invert, transform_points
+from accumcli.outputs import OutputSet
 from accumcli.pipeline import AccumulationStep
 from accumcli.visualize import RerunLog
 
@@ -156,3 +162,64 @@ def test_trajectory_and_scalars(tmp_path):
     assert "stats/ok" not in paths and "stats/status" not in paths
     assert frames == 4
     assert np.allclose(rrd_column(path, "world/trajectory", "LineStrips3D:strips")[0], np.arange(12.0).reshape(4, 3))
+
+
+def test_images_are_jpeg(tmp_path):
+    path = tmp_path / "img.rrd"
+    with RerunLog("accum test", rrd=str(path), kind="extract") as log:
+        frame, result = frame_and_extraction(0, cube_model())
+        log.extraction(frame, result)
+    for entity, image in (("world/camera/image", frame.left), ("images/right", frame.right)):
+        assert rrd_column(path, entity, "EncodedImage:media_type") == [["image/jpeg"]]
+        blob = np.array(rrd_column(path, entity, "EncodedImage:blob")[0][0], np.uint8)
+        decoded = cv2.imdecode(blob, cv2.IMREAD_UNCHANGED)
+        assert decoded.shape == image.shape
+        assert np.abs(decoded.astype(int) - image).mean() < 8  # JPEG quality 85 on a small test image
+
+
+def test_rrd_is_part_of_an_output_set(tmp_path):
+    target = tmp_path / "run.rrd"
+    with pytest.raises(KeyboardInterrupt):
+        with OutputSet([target]) as out:
+            log = RerunLog("accum test", rrd=out.path(target), kind="view")
+            log.close()
+            raise KeyboardInterrupt
+    assert list(tmp_path.iterdir()) == []  # no 0-byte run.rrd, no temp
+    with OutputSet([target]) as out, RerunLog("accum test", rrd=out.path(target), kind="view"):
+        pass
+    assert len(RrdReader(target).recordings()) == 1
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the display check is for Linux")
+def test_spawn_without_a_display(monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    monkeypatch.setattr(visualize.rr, "spawn", lambda **kw: pytest.fail("must not try to spawn"))
+    with pytest.raises(AccumError, match=r"^cannot start the Rerun viewer: no display .*; use --rrd"):
+        RerunLog("accum test", spawn=True)
+
+
+def test_spawn_without_a_viewer(monkeypatch, tmp_path):
+    monkeypatch.setenv("DISPLAY", ":0")
+    monkeypatch.setattr(visualize.sys, "executable", str(tmp_path / "python"))
+    monkeypatch.setattr(visualize.shutil, "which", lambda name: None)
+    with pytest.raises(AccumError, match=r"^cannot start the Rerun viewer: no 'rerun' executable .*; use --rrd"):
+        RerunLog("accum test", spawn=True)
+
+
+def test_spawn_failure_is_one_line(monkeypatch, tmp_path):
+    viewer = tmp_path / "rerun"
+    viewer.write_text("#!/bin/sh\n")
+    viewer.chmod(0o755)
+    monkeypatch.setenv("DISPLAY", ":0")
+    monkeypatch.setattr(visualize.sys, "executable", str(tmp_path / "python"))
+    calls = []
+
+    def failing_spawn(**kwargs):
+        calls.append(kwargs["executable_path"])
+        raise RuntimeError("viewer exited")
+
+    monkeypatch.setattr(visualize.rr, "spawn", failing_spawn)
+    with pytest.raises(AccumError, match=r"^cannot start the Rerun viewer \(RuntimeError: viewer exited\); use --rrd$"):
+        RerunLog("accum test", spawn=True)
+    assert calls == [str(viewer)]

@@ -1,6 +1,7 @@
 """Writing recordings (simulator output, tracked poses) as MCAP with Foxglove
-protobuf schemas, so they open in Foxglove. The file appears atomically when
-the writer is closed without error."""
+protobuf schemas, so they open in Foxglove. Written to a path, the file appears
+atomically when the writer is closed without error (``atomic.atomic_open``);
+or to a binary file opened by an ``outputs.OutputSet``, which then owns it."""
 
 from __future__ import annotations
 
@@ -9,18 +10,19 @@ import contextlib
 import numpy as np
 from mcap_protobuf.writer import Writer
 
-from ..atomic import atomic_open
+from ..atomic import opened
 from ..geometry import quat_from_transform
 from .calibration import CameraCalibration
 from .messages import calibration_to_msg, image_to_msg, transform_to_msg
 
 
 class RecordingWriter:
-    """Context manager writing protobuf messages to ``path``; log time = the message time."""
+    """Context manager writing protobuf messages to ``target`` (a path or an open binary
+    file); log time = the message time."""
 
-    def __init__(self, path):
+    def __init__(self, target):
         self._stack = contextlib.ExitStack()
-        self._file = self._stack.enter_context(atomic_open(path, "wb"))
+        self._file = self._stack.enter_context(opened(target, "wb"))
         self._writer = Writer(self._file)
 
     def calibration(self, topic: str, calibration: CameraCalibration, t_ns: int) -> None:

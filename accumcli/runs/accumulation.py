@@ -109,18 +109,18 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
             result.scores = score_segments(result.model.select(result.model.accepted), edges).as_dict()
         for path in outputs:
             if str(path).lower().endswith(".ply"):
-                write_ply(files.path(path), result.model, all_segments=ply_all)
+                write_ply(files.open(path), result.model, all_segments=ply_all)
             else:
-                write_model(files.path(path), result.model)
+                write_model(files.open(path), result.model)
         if history:
-            write_json_lines(files.path(history), result.rows)
+            write_json_lines(files.open(history), result.rows)
         if png or panel:
             from ..render import render_frame_panel, render_model, write_png
 
             if png:
-                write_png(files.path(png), render_model(result.model))
+                write_png(files.open(png, "wb"), render_model(result.model))
             if panel:
-                write_png(files.path(panel), render_frame_panel(step.frame, step.extraction, result.model,
+                write_png(files.open(panel, "wb"), render_frame_panel(step.frame, step.extraction, result.model,
                                                                 step.T_camera_object))
     result.seconds = time.perf_counter() - t0
     result.outputs = [str(p) for p in (*outputs, history, rrd, png, panel) if p]

@@ -7,7 +7,7 @@ import numpy as np
 from ..errors import InputError
 from ..evaluate import Tolerances, evaluate_frames, evaluate_model, pose_errors
 from ..funnel import funnel
-from ..model_io import file_kind, read_frames, read_model, read_poses, read_truth
+from ..model_io import check_kind, read_frames, read_model, read_poses, read_truth
 from ..surface import faces_of, surface_scores
 from .base import FrameRange
 from .checks import check_truth_matches, check_truth_times
@@ -24,7 +24,7 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
     another object frame, or one with no pose at the file's timestamps, is refused. A truth with
     ``faces`` also gives a model's precision judged by surface (``accumcli.surface``; ``support_face``: the face it stands on)."""
     truth = read_truth(truth_path)
-    kind = file_kind(path)
+    kind = check_kind(path, "model", "frames", "poses")
     if kind == "model":
         model = read_model(path)
         check_truth_matches(truth, model.frame_id, truth_path)

@@ -52,7 +52,7 @@ def extract_recording(recording, output, *, params: ExtractParams = ExtractParam
     t0 = time.perf_counter()
     with options.open(recording, require_pose=False) as rec, outputs:
         total = frames.check(rec)
-        with FramesWriter(outputs.path(output)) as out, rerun_log(outputs, rrd, "extract") as viz:
+        with FramesWriter(outputs.open(output)) as out, rerun_log(outputs, rrd, "extract") as viz:
             for frame, extraction in extracted_frames(rec.frames(frames.start, frames.stop), params,
                                                       rec.camera_frame, workers, result.times):
                 header = {"frame_index": frame.index, "counts": extraction.counts,

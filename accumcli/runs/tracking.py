@@ -104,10 +104,10 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
                           np.array(poses).reshape(-1, 4, 4), status, extra)
         for path in outputs:
             if str(path).lower().endswith(".tum"):
-                write_poses_tum(files.path(path), track)
+                write_poses_tum(files.open(path), track)
             elif str(path).lower().endswith(".mcap"):
-                write_poses_mcap(files.path(path), track, topic=poses_topic,
-                                 child_frame=poses_child_frame or f"{rec.object_frame}_tracked")
+                write_poses_mcap(files.open(path, "wb"), track, topic=poses_topic,
+                                 child_frame_id=poses_child_frame or f"{rec.object_frame}_tracked")
             else:
-                write_poses(files.path(path), track)
+                write_poses(files.open(path), track)
     return TrackingResult(track, time.perf_counter() - t0, [str(p) for p in (*outputs, rrd) if p])

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import AccumError, InputError
-from ..model_io import file_kind, read_frames, read_model, read_poses, read_truth
+from ..model_io import check_kind, read_frames, read_model, read_poses, read_truth
 from ..outputs import OutputSet
 from ..segments import Segments
 from .base import FrameRange, Progress, RecordingOptions, no_progress
@@ -29,7 +29,7 @@ class ViewInputs:
     def of(cls, paths) -> "ViewInputs":
         inputs = cls()
         for path in paths:
-            kind = file_kind(path)
+            kind = check_kind(path, "recording", "model", "frames", "poses", "truth")
             if kind == "recording":
                 if inputs.recording is not None:
                     raise InputError(f"{path}: give at most one recording (already {inputs.recording})")
@@ -79,7 +79,7 @@ def view(paths, *, rrd=None, spawn: bool = False, connect: str | None = None, pn
         if rrd or spawn or connect:
             _log_to_rerun(inputs, files.path(rrd) if rrd else None, spawn, connect, options, frames, progress)
         if png:
-            _draw_picture(inputs, files.path(png), png_frame, options)
+            _draw_picture(inputs, files.open(png, "wb"), png_frame, options)
     return [str(p) for p in (rrd, png) if p]
 
 

@@ -1,0 +1,218 @@
+"""Outputs of a run as a set (accumcli.outputs) and its single-file case (accumcli.atomic)."""
+
+from __future__ import annotations
+
+import builtins
+import errno
+import os
+import signal
+import threading
+
+import pytest
+
+from accumcli import outputs
+from accumcli.atomic import atomic_open, atomic_path
+from accumcli.errors import AccumError
+from accumcli.outputs import OutputSet, interrupt_on_sigterm, output_error
+from accumcli.recording import RecordingWriter
+
+
+def names(folder) -> list[str]:
+    return sorted(p.name for p in folder.iterdir())
+
+
+def test_all_appear_together_at_the_end(tmp_path):
+    a, b = str(tmp_path / "model.json"), str(tmp_path / "run.rrd")
+    with OutputSet([a, b]) as out:
+        with out.open(a) as f:
+            f.write("new a")
+        with open(out.path(b), "wb") as f:
+            f.write(b"new b")
+        temps = names(tmp_path)
+        assert len(temps) == 2 and all(n.startswith(".accum-") and n.endswith(".tmp") and len(n) == 19
+                                       for n in temps)
+    assert names(tmp_path) == ["model.json", "run.rrd"]
+    assert (tmp_path / "model.json").read_text() == "new a" and (tmp_path / "run.rrd").read_bytes() == b"new b"
+    assert out.paths == [a, b]
+
+
+@pytest.mark.parametrize("error", [KeyboardInterrupt, SystemExit, ValueError])
+def test_an_exception_keeps_the_previous_files(tmp_path, error):
+    a, b = tmp_path / "model.json", tmp_path / "model.ply"
+    a.write_text("old a")
+    b.write_text("old b")
+    with pytest.raises(error):
+        with OutputSet([a, b]) as out:
+            out.open(a).write("new a")
+            out.open(b, "wb").write(b"new b")
+            raise error
+    assert a.read_text() == "old a" and b.read_text() == "old b"
+    assert names(tmp_path) == ["model.json", "model.ply"]
+
+
+def test_outputs_not_handed_out_are_left_alone(tmp_path):
+    (tmp_path / "panel.png").write_text("old")
+    with OutputSet([tmp_path / "m.json", tmp_path / "panel.png"]) as out:
+        out.open(tmp_path / "m.json").write("{}")
+        with pytest.raises(KeyError, match="other.json is not an output of this set"):
+            out.open(tmp_path / "other.json")
+    assert (tmp_path / "panel.png").read_text() == "old" and (tmp_path / "m.json").read_text() == "{}"
+    with pytest.raises(RuntimeError, match="the output set is already finished"):
+        out.open(tmp_path / "m.json")
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda d: d / "nope" / "m.json", r"m\.json: the folder .*nope does not exist; create it or write elsewhere$"),
+    (lambda d: d, r": is a folder; give a file name$"),
+    (lambda d: d / ("x" * 256), r"the file name is 256 bytes, more than the 255 its folder allows; give a shorter"),
+])
+def test_checked_before_any_work(tmp_path, make, message):
+    with pytest.raises(AccumError, match=message):
+        OutputSet([tmp_path / "ok.json", make(tmp_path)])
+    assert names(tmp_path) == []
+
+
+def test_given_twice(tmp_path):
+    with pytest.raises(AccumError, match="m.json: given twice as an output; give each output once"):
+        OutputSet([str(tmp_path / "m.json"), str(tmp_path / "m.json")])
+    (tmp_path / "sub").mkdir()
+    with pytest.raises(AccumError, match=r"two outputs are the same file"):
+        OutputSet([str(tmp_path / "m.json"), str(tmp_path / "." / "sub" / ".." / "m.json")])
+    (tmp_path / "real.json").write_text("")
+    (tmp_path / "link.json").symlink_to(tmp_path / "real.json")
+    with pytest.raises(AccumError, match=r"two outputs are the same file"):
+        OutputSet([tmp_path / "real.json", tmp_path / "link.json"])
+
+
+def test_a_long_name_works(tmp_path):
+    target = tmp_path / ("m" * 243 + ".json")
+    with atomic_open(target) as f:
+        f.write("ok")
+    assert len(target.name) == 248 and target.read_text() == "ok"
+
+
+@pytest.mark.parametrize("code, message", [
+    (errno.EACCES, r"m\.json: cannot create a file in .* \(Permission denied\); choose a folder you can write to$"),
+    (errno.EROFS, r"m\.json: cannot create a file in .* \(Read-only file system\)"),
+])
+def test_unwritable_folder_is_refused_up_front(tmp_path, monkeypatch, code, message):
+    def refuse(*args, **kwargs):
+        raise OSError(code, os.strerror(code))
+
+    monkeypatch.setattr(outputs.tempfile, "mkstemp", refuse)
+    with pytest.raises(AccumError, match=message):
+        OutputSet([tmp_path / "m.json"])
+
+
+def test_full_disk_while_writing(tmp_path, monkeypatch):
+    target = tmp_path / "model.json"
+    target.write_text("old")
+    monkeypatch.setattr(outputs, "open", lambda path, mode, encoding=None: builtins.open("/dev/full", mode),
+                        raising=False)
+    with pytest.raises(AccumError, match=r"^no space left on device writing .*model\.json; free some space"):
+        with OutputSet([target]) as out:
+            out.open(target).write("x" * 100_000)
+    assert target.read_text() == "old" and names(tmp_path) == ["model.json"]
+
+
+def test_other_os_errors_are_not_taken_for_output_faults(tmp_path):
+    with pytest.raises(PermissionError, match="secret.mcap"):  # reading an input: not ours to rename
+        with OutputSet([tmp_path / "m.json"]) as out:
+            out.open(tmp_path / "m.json")
+            raise PermissionError(errno.EACCES, "Permission denied", str(tmp_path / "secret.mcap"))
+    with pytest.raises(AccumError, match=r"^no space left on device writing .*m\.json; "):
+        with OutputSet([tmp_path / "m.json"]) as out:
+            out.path(tmp_path / "m.json")
+            raise OSError(errno.ENOSPC, "No space left on device")  # e.g. from a writer given out.path()
+    assert names(tmp_path) == []
+
+
+def test_output_error_messages():
+    assert str(output_error(OSError(errno.ENOSPC, "x"), "a.rrd")) == \
+        "no space left on device writing a.rrd; free some space or write elsewhere"
+    assert str(output_error(OSError(errno.EROFS, "x"), "a.rrd")) == \
+        "read-only file system: cannot write a.rrd; write to another folder"
+    assert output_error(OSError(errno.EBADF, "x"), "a.rrd") is None
+
+
+def test_symlink_stays_a_link_and_mode_is_kept(tmp_path):
+    real = tmp_path / "store" / "model.json"
+    real.parent.mkdir()
+    real.write_text("old")
+    real.chmod(0o600)
+    link = tmp_path / "model.json"
+    link.symlink_to(real)
+    with atomic_open(link) as f:
+        f.write("new")
+    assert link.is_symlink() and os.readlink(link) == str(real)
+    assert real.read_text() == "new" and (real.stat().st_mode & 0o777) == 0o600
+    assert names(real.parent) == ["model.json"]
+
+
+def test_new_file_mode_follows_the_umask(tmp_path):
+    old = os.umask(0o027)
+    try:
+        with atomic_path(tmp_path / "run.rrd") as temp:
+            assert (os.stat(temp).st_mode & 0o777) == 0o600
+    finally:
+        os.umask(old)
+    assert ((tmp_path / "run.rrd").stat().st_mode & 0o777) == 0o640
+
+
+@pytest.mark.parametrize("other_thread", [False, True])
+def test_interrupt_during_the_renames_does_not_split_the_set(tmp_path, monkeypatch, other_thread):
+    # With another thread alive the kernel hands it the signal the main thread blocks.
+    stop = threading.Event()
+    if other_thread:
+        threading.Thread(target=stop.wait, daemon=True).start()
+    paths = [tmp_path / f"{i}.json" for i in range(3)]
+    replace = os.replace
+    calls = []
+
+    def replace_then_interrupt(src, dst):
+        replace(src, dst)
+        calls.append(dst)
+        if len(calls) == 1:
+            os.kill(os.getpid(), signal.SIGINT)  # held back until all three are renamed
+
+    monkeypatch.setattr(outputs.os, "replace", replace_then_interrupt)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # other tests' libraries replace it
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with OutputSet(paths) as out:
+                for p in paths:
+                    out.open(p).write("new")
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        stop.set()
+    assert len(calls) == 3 and all(p.read_text() == "new" for p in paths)
+    assert names(tmp_path) == ["0.json", "1.json", "2.json"]
+
+
+def test_sigterm_becomes_keyboard_interrupt(tmp_path):
+    previous = signal.getsignal(signal.SIGTERM)
+    try:
+        interrupt_on_sigterm()
+        with pytest.raises(KeyboardInterrupt, match="SIGTERM"):
+            with OutputSet([tmp_path / "m.json"]) as out:
+                out.open(tmp_path / "m.json").write("new")
+                os.kill(os.getpid(), signal.SIGTERM)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert names(tmp_path) == []
+
+
+def test_recording_writer_is_atomic(tmp_path):
+    target = tmp_path / "rec.mcap"
+    with pytest.raises(RuntimeError):
+        with RecordingWriter(target) as w:
+            w.metadata("x", {"a": 1})
+            raise RuntimeError("stop")
+    assert names(tmp_path) == []
+    with RecordingWriter(target) as w:
+        w.metadata("x", {"a": 1})
+    assert target.read_bytes().startswith(b"\x89MCAP")
+    with OutputSet([target]) as out:
+        with RecordingWriter(out.open(target, "wb")) as w:
+            w.metadata("y", {"b": 2})
+    assert b"y" in target.read_bytes() and names(tmp_path) == ["rec.mcap"]
