@@ -24,13 +24,15 @@ class Polygon:
     """A planar convex polygon. vertices: (K, 3) metres, counter-clockwise seen
     from outside; normal: (3,) outward unit; albedo in [0, 1]. ``decal`` polygons
     are painted on another polygon's surface and win its depth test; ``cull``
-    polygons are invisible from behind (faces of closed solids)."""
+    polygons are invisible from behind (faces of closed solids). Only the triangle
+    renderer (``raster.py``) draws non-convex polygons and ``texture``."""
 
     vertices: np.ndarray
     normal: np.ndarray
     albedo: float
     cull: bool = True
     decal: bool = False
+    texture: object = None  # raster.Texture (random scenes only)
 
 
 @dataclass
@@ -131,17 +133,18 @@ def _area(section: np.ndarray) -> float:
     return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
 
 
-def make_gripper(half_width: float, object_top: float) -> Part:
-    """Two fingers clamping the object at x = +-half_width, a palm and a wrist above it (towards -y)."""
+def make_gripper(half_width: float, object_top: float, albedos: tuple = (0.35, 0.5, 0.6)) -> Part:
+    """Two fingers clamping the object at x = +-half_width, a palm and a wrist above it (towards -y);
+    ``albedos`` of the fingers, the palm and the wrist."""
     part = Part()
     palm_y = object_top - 0.025
     for sign in (-1, 1):
         finger = _box((sign * (half_width + 0.006), (palm_y + 0.012) / 2, 0.0), (0.012, 0.012 - palm_y, 0.026),
-                      0.35, "gripper")
+                      albedos[0], "gripper")
         part.polygons += finger.polygons
         part.edges += finger.edges
-    palm = _box((0.0, palm_y - 0.012, 0.0), (2 * half_width + 0.036, 0.024, 0.05), 0.5, "gripper")
-    wrist = _box((0.0, palm_y - 0.024 - 0.1, 0.0), (0.05, 0.2, 0.05), 0.6, "gripper")
+    palm = _box((0.0, palm_y - 0.012, 0.0), (2 * half_width + 0.036, 0.024, 0.05), albedos[1], "gripper")
+    wrist = _box((0.0, palm_y - 0.024 - 0.1, 0.0), (0.05, 0.2, 0.05), albedos[2], "gripper")
     for piece in (palm, wrist):
         part.polygons += piece.polygons
         part.edges += piece.edges
