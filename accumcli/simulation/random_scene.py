@@ -16,7 +16,7 @@ from scipy.spatial.transform import Rotation
 
 from ..geometry import make_transform, unit
 from .raster import Texture
-from .scene import Polygon, _box, _clip_convex, make_gripper
+from .scene import Polygon, _box, _stripe, make_gripper
 
 # Profiles in the xy plane, counter-clockwise in a unit box [-0.5, 0.5]^2 (x, y), y down.
 PROFILES = {
@@ -128,16 +128,8 @@ def _band(face: Polygon, rng: np.random.Generator, albedo: float):
     span = levels.max() - levels.min()
     width = span * rng.uniform(0.12, 0.3)
     centre = levels.min() + span * rng.uniform(0.3, 0.7)
-    lo, hi = centre - width / 2, centre + width / 2
-    band = _clip_convex(_clip_convex(face.vertices, across, hi), -across, -lo)
-    if len(band) < 3:
-        return None, []
-    edges = []
-    for level in (lo, hi):
-        on = band[np.abs(band @ across - level) < 1e-9]
-        if len(on) >= 2:
-            edges.append((on[0], on[-1], "paint"))
-    return Polygon(band, face.normal, albedo, cull=True, decal=True), edges
+    polygon, edges = _stripe(face, across, centre - width / 2, centre + width / 2, albedo, "paint")
+    return (polygon, edges) if len(polygon.vertices) >= 3 else (None, [])
 
 
 def _window(face: Polygon, rng: np.random.Generator, albedo: float):

@@ -30,7 +30,7 @@ from .random_scene import (BACKGROUNDS, RANDOM_SHAPES, draw_lighting, draw_motio
                            make_random_gripper, make_random_object, random_trajectory)
 from .raster import Buffers, Mesh, draw
 from .simulate import (FRAME_PERIOD_NS, RAW_MARGIN_PX, START_NS, SimulationOptionError, SimulationOptions,
-                       SimulationResult, _calibrations, _interpolate_at, _rectified_camera, _write_poses)
+                       SimulationResult, _calibrations, _interpolate_at, _rectified_camera, _write_poses, project_inside)
 
 MIN_STEP_GREY = 6.0
 STEP_OFFSET_PX = 2.0
@@ -153,13 +153,7 @@ def visible_samples(points_obj: np.ndarray, tangents_obj: np.ndarray, T_cam_obj:
                     moving: Mesh, image: np.ndarray, camera, supersample: int, margin: int) -> np.ndarray:
     """(M,) bool: samples (object frame, metres) visible in one camera (module docstring); ``image``
     the noise-free (H, W) float32 grey levels of that camera with ``margin`` px on each side."""
-    p = transform_points(T_cam_obj, points_obj)
-    z = p[:, 2]
-    ok = z > 0.05
-    zs = np.where(ok, z, 1.0)
-    u = camera.fx * p[:, 0] / zs + camera.cx
-    v = camera.fy * p[:, 1] / zs + camera.cy
-    ok &= (u >= 3) & (u <= camera.width - 4) & (v >= 3) & (v <= camera.height - 4)
+    z, u, v, ok = project_inside(transform_points(T_cam_obj, points_obj), camera)
     S = supersample
     H, W = buffers.depth.shape
     cols = np.clip(np.round((u + margin + 0.5) * S - 0.5).astype(int), 0, W - 1)

@@ -82,14 +82,15 @@ def _clip_convex(vertices: np.ndarray, normal: np.ndarray, offset: float) -> np.
     return np.array(out)
 
 
-def _stripe(face: Polygon, across: np.ndarray, lo: float, hi: float, albedo: float) -> tuple[Polygon, list]:
-    """A painted band ``lo <= x . across <= hi`` on a face, and its two boundary edges."""
+def _stripe(face: Polygon, across: np.ndarray, lo: float, hi: float, albedo: float,
+            kind: str = "stripe") -> tuple[Polygon, list]:
+    """A painted band ``lo <= x . across <= hi`` on a face, and its two boundary edges (of ``kind``)."""
     band = _clip_convex(_clip_convex(face.vertices, across, hi), -across, -lo)
     edges = []
     for level in (lo, hi):
         on = band[np.abs(band @ across - level) < 1e-9]
         if len(on) >= 2:
-            edges.append((on[0], on[-1], "stripe"))
+            edges.append((on[0], on[-1], kind))
     return Polygon(band, face.normal, albedo, cull=True, decal=True), edges
 
 

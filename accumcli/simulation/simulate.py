@@ -170,15 +170,22 @@ def _sample_edges(edges: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.concatenate(points), np.concatenate(tangents), np.concatenate(owner)
 
 
-def _visible(points_cam: np.ndarray, tangents_cam: np.ndarray, camera: PinholeCamera, depth_min: np.ndarray,
-             clean: np.ndarray, supersample: int, margin: int) -> np.ndarray:
-    """(M,) bool: samples in front, inside the image, unoccluded and on a grey-level step."""
+def project_inside(points_cam: np.ndarray, camera: PinholeCamera):
+    """Depth z (M,) metres, pixel (u, v) (M,) each, and (M,) bool: in front (z > 5 cm) and at least 3 px
+    inside the image, of points (M, 3) in the camera frame."""
     z = points_cam[:, 2]
     ok = z > 0.05
     zs = np.where(ok, z, 1.0)
     u = camera.fx * points_cam[:, 0] / zs + camera.cx
     v = camera.fy * points_cam[:, 1] / zs + camera.cy
     ok &= (u >= 3) & (u <= camera.width - 4) & (v >= 3) & (v <= camera.height - 4)
+    return z, u, v, ok
+
+
+def _visible(points_cam: np.ndarray, tangents_cam: np.ndarray, camera: PinholeCamera, depth_min: np.ndarray,
+             clean: np.ndarray, supersample: int, margin: int) -> np.ndarray:
+    """(M,) bool: samples in front, inside the image, unoccluded and on a grey-level step."""
+    z, u, v, ok = project_inside(points_cam, camera)
     S = supersample
     us = np.clip(np.round((u + margin + 0.5) * S - 0.5).astype(int), 0, depth_min.shape[1] - 1)
     vs = np.clip(np.round((v + margin + 0.5) * S - 0.5).astype(int), 0, depth_min.shape[0] - 1)
