@@ -289,7 +289,7 @@ def make_random_background(kind: str, rng: np.random.Generator, mean: float, nea
 
 
 def make_clutter(rng: np.random.Generator, distance: float, moving_boxes: np.ndarray, tan_half, mean: float) -> list:
-    """Static solids at the object's depth (``distance`` +- 0.12 m) beside, above and below its path.
+    """Static solids (a list of polygon lists, camera frame) at the object's depth (``distance`` +- 0.12 m) beside, above and below its path.
 
     ``moving_boxes`` (F, 2, 3): per frame the axis-aligned box (min, max corners, camera frame) around the
     object and gripper; a solid whose box comes within 5 mm of any of them is drawn again (up to 40 times).
@@ -323,14 +323,14 @@ def make_clutter(rng: np.random.Generator, distance: float, moving_boxes: np.nda
             continue
         albedo = float(np.clip(mean + rng.normal(0, 0.25), 0.05, 0.95))
         if rail or rng.uniform() < 0.5:
-            polygons += _posed_box(center, (sx, sy, sz), albedo, R)
+            polygons.append(_posed_box(center, (sx, sy, sz), albedo, R))
         else:
             shape = str(rng.choice(RANDOM_SHAPES))
             solid = extrude(profile(shape, sx, sy), -sz / 2, sz / 2, np.full(len(PROFILES[shape]) + 2, albedo))
             for polygon in solid.polygons:
                 polygon.vertices = polygon.vertices @ R.T + center
                 polygon.normal = R @ polygon.normal
-            polygons += solid.polygons
+            polygons.append(solid.polygons)
         placed += 1
     return polygons
 

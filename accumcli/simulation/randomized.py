@@ -137,8 +137,8 @@ def build_world(o: SimulationOptions, render_camera, camera) -> World:
     static_polygons = make_random_background(d.background, _stream(o.seed, "background"), d.background_albedo,
                                              reach + 0.05, tan_half)
     if d.clutter:
-        static_polygons += make_clutter(_stream(o.seed, "clutter"), d.distance_m, boxes, tan_half,
-                                        d.background_albedo)
+        for solid in make_clutter(_stream(o.seed, "clutter"), d.distance_m, boxes, tan_half, d.background_albedo):
+            static_polygons += solid
     static_mesh = Mesh.of(static_polygons, first_id=len(moving.albedo))
     lighting = draw_lighting(_stream(o.seed, "light"), o.frames, d.illumination)
     static = []
