@@ -238,9 +238,11 @@ def _posed_box(center, size, albedo, R) -> list:
     return box.polygons
 
 
-def make_random_background(kind: str, rng: np.random.Generator, mean: float, near: float,
+def make_random_background(kind: str, rng: np.random.Generator, mean: float, near: float, floor_min: float,
                            tan_half: tuple[float, float]) -> list:
-    """Static polygons (camera frame) behind depth ``near`` metres, mean albedo about ``mean``.
+    """Static polygons (camera frame) behind depth ``near`` metres, mean albedo about ``mean``; a floor
+    lies at y >= ``floor_min`` (below the moving parts). Solids or planes drawn nearer than ``near`` are
+    pushed back along z until they are not.
 
     ``texture``: a blotchy wall at 1.3 to 3 m and often a floor; ``planes``: the wall and 2 to 4 textured
     planes at random depths and tilts; ``lines``: a wall and floor with tiles, grain or strokes and 3 to 9
@@ -258,7 +260,7 @@ def make_random_background(kind: str, rng: np.random.Generator, mean: float, nea
     polygons.append(_textured_quad(wall, np.array([0.0, 0.0, -1.0]), texture(rng, mean, amplitude, 512),
                                    2 * hw / 512))
     if kind == "lines" or rng.uniform() < 0.6:  # a floor y = h below the camera, from the near edge to the wall
-        floor_y = rng.uniform(0.18, 0.4)
+        floor_y = max(rng.uniform(0.18, 0.4), floor_min)
         floor = np.array([[-hw, floor_y, 0.2], [hw, floor_y, 0.2], [hw, floor_y, wall_z], [-hw, floor_y, wall_z]])
         floor_tex = line_texture(rng, float(np.clip(mean + rng.normal(0, 0.12), 0.1, 0.9)), amplitude, 512)
         polygon = _textured_quad(floor, np.array([0.0, -1.0, 0.0]), floor_tex, 2 * hw / 512)
@@ -271,20 +273,32 @@ def make_random_background(kind: str, rng: np.random.Generator, mean: float, nea
             corners, normal = _plane_quad(center, normal, [0.0, 1.0, 0.0], *(rng.uniform(0.08, 0.4, 2) * z))
             tex = (line_texture if rng.uniform() < 0.4 else noise_texture)(
                 rng, float(np.clip(mean + rng.normal(0, 0.2), 0.05, 0.95)), amplitude)
-            polygons.append(_textured_quad(corners, normal, tex, np.linalg.norm(corners[1] - corners[0]) / 256))
+            polygons += _behind([_textured_quad(corners, normal, tex, np.linalg.norm(corners[1] - corners[0]) / 256)],
+                                near)
     if kind == "lines":
         for _ in range(int(rng.integers(3, 10))):
             z = rng.uniform(near + 0.05, wall_z - 0.05)
             center = np.array([rng.uniform(-1, 1) * tan_half[0] * z, rng.uniform(-1, 1) * tan_half[1] * z, z])
             R = Rotation.from_euler("zy", [rng.uniform(0, 180), rng.uniform(-40, 40)], degrees=True).as_matrix()
             thick = rng.uniform(0.004, 0.02)
-            polygons += _posed_box(center, (3.0 * z, thick, thick), float(rng.uniform(0.05, 0.95)), R)
+            polygons += _behind(_posed_box(center, (3.0 * z, thick, thick), float(rng.uniform(0.05, 0.95)), R), near)
     for _ in range(int(rng.integers(0, 5))):
         z = rng.uniform(near + 0.1, wall_z - 0.1)
         size = rng.uniform(0.05, 0.25, 3)
         center = np.array([rng.uniform(-1, 1) * tan_half[0] * z, rng.uniform(-1, 1) * tan_half[1] * z, z])
         R = Rotation.from_euler("y", rng.uniform(-40, 40), degrees=True).as_matrix()
-        polygons += _posed_box(center, size, float(rng.uniform(0.05, 0.95)), R)
+        polygons += _behind(_posed_box(center, size, float(rng.uniform(0.05, 0.95)), R), near)
+    return polygons
+
+
+def _behind(polygons: list, near: float) -> list:
+    """``polygons`` moved along +z so that none of their vertices is nearer than ``near`` (in place)."""
+    shift = near - min(p.vertices[:, 2].min() for p in polygons)
+    if shift > 0:
+        for polygon in polygons:
+            polygon.vertices = polygon.vertices + [0.0, 0.0, shift]
+            if polygon.texture is not None:
+                polygon.texture.origin = polygon.texture.origin + [0.0, 0.0, shift]
     return polygons
 
 
@@ -391,7 +405,7 @@ class Lighting:
 
 def draw_lighting(rng: np.random.Generator, frames: int, drift: float) -> Lighting:
     """A light from the camera's side (azimuth +-45 deg, from above by 10 to 60 deg), ambient 0.3 to 0.6;
-    over the sequence the light turns by up to 40 * ``drift`` / 0.2 deg, the gain drifts by +-``drift``
+    over the sequence the light turns by up to 200 * ``drift`` deg, the gain drifts by +-``drift``
     (relative) and the offset by +-30 * ``drift`` grey levels, along smooth random curves."""
     azimuth, elevation = np.radians(rng.uniform(-45, 45)), np.radians(rng.uniform(10, 60))
     turn = np.radians(rng.uniform(-1, 1, 2) * 200.0 * drift)

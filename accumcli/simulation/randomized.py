@@ -135,7 +135,7 @@ def build_world(o: SimulationOptions, render_camera, camera) -> World:
     boxes = np.stack([placed.min(axis=1), placed.max(axis=1)], axis=1)
     reach = float(np.max(placed[..., 2]))
     static_polygons = make_random_background(d.background, _stream(o.seed, "background"), d.background_albedo,
-                                             reach + 0.05, tan_half)
+                                             reach + 0.05, float(np.max(placed[..., 1])) + 0.02, tan_half)
     if d.clutter:
         for solid in make_clutter(_stream(o.seed, "clutter"), d.distance_m, boxes, tan_half, d.background_albedo):
             static_polygons += solid

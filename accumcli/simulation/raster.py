@@ -2,7 +2,8 @@
 
 Every polygon is triangulated once (ear clipping in its plane). A triangle
 covers the supersampled pixels whose centres lie inside it or on its boundary
-(edge functions over its bounding box, vectorised); each covered pixel gets the
+(per row, the span of columns where its three edge functions are >= 0; the
+pixels of all spans at once, vectorised); each covered pixel gets the
 depth of the triangle's plane along its ray (1/z is affine in the image), and
 the nearest surface wins. Coverage is exact at pixel centres, so neighbouring
 triangles of one face leave no seam and the area-averaged image is unbiased.
