@@ -16,7 +16,7 @@ from scipy.spatial.transform import Rotation
 
 from ..geometry import make_transform, unit
 from .raster import Texture
-from .scene import Polygon, _box, _stripe, make_gripper
+from .scene import GripperSize, Polygon, _box, _stripe, make_gripper
 
 # Profiles in the xy plane, counter-clockwise in a unit box [-0.5, 0.5]^2 (x, y), y down.
 PROFILES = {
@@ -165,9 +165,20 @@ def _inside_convex(face: Polygon, points: np.ndarray) -> bool:
     return True
 
 
-def make_random_gripper(half_width: float, object_top: float, rng: np.random.Generator) -> Solid:
-    """The two fingers, palm and wrist of ``scene.make_gripper``, with drawn grey levels; kind 'crease'."""
-    part = make_gripper(half_width, object_top, albedos=tuple(rng.uniform(0.15, 0.8, 3)))
+def make_random_gripper(obj: Solid, half_width: float, rng: np.random.Generator) -> Solid:
+    """The fingers, palm and wrist of ``scene.make_gripper`` sized to the object ``obj`` (fingers 0.15 of its
+    size thick, reaching 60 % down its height; palm and wrist up to the classic gripper's), with grey levels
+    U(0.15, 0.8); every edge of kind 'crease'."""
+    vertices = np.concatenate([p.vertices for p in obj.polygons])
+    top, bottom = vertices[:, 1].min(), vertices[:, 1].max()
+    size = float(np.ptp(vertices, axis=0).max())
+    depth = float(np.ptp(vertices[:, 2]))
+    clip = lambda x, lo, hi: float(np.clip(x, lo, hi))  # noqa: E731
+    dims = GripperSize(finger=clip(0.15 * size, 0.005, 0.012), finger_depth=clip(0.5 * depth, 0.008, 0.026),
+                       reach=top + 0.6 * (bottom - top), gap=clip(0.25 * size, 0.01, 0.025),
+                       palm=clip(0.3 * size, 0.01, 0.024), palm_depth=clip(depth, 0.015, 0.05),
+                       wrist=clip(0.5 * size, 0.02, 0.05))
+    part = make_gripper(half_width, top, albedos=tuple(rng.uniform(0.15, 0.8, 3)), size=dims)
     return Solid(part.polygons, [(a, b, "crease") for a, b, _ in part.edges])
 
 
@@ -353,7 +364,8 @@ def make_clutter(rng: np.random.Generator, distance: float, moving_boxes: np.nda
 @dataclass(frozen=True)
 class Motion:
     """A smooth path: centre (3,) metres, translation amplitudes (3,) metres, rotation amplitudes
-    (yaw, pitch, roll) degrees, pitch offset degrees, the turn per frame in degrees and phases (4,)."""
+    (yaw, pitch, roll) degrees, pitch offset degrees, the turn per frame in degrees and phases (4,);
+    ``approach_deg`` turns the object about its x axis first (-90: the wrist points away from the camera)."""
 
     center: tuple
     amplitude_m: tuple
@@ -361,20 +373,23 @@ class Motion:
     pitch_offset_deg: float
     per_frame_deg: float
     phases: tuple
+    approach_deg: float = 0.0
 
 
 def draw_motion(rng: np.random.Generator, distance: float, size: float, per_frame_deg: float,
                 tan_half) -> Motion:
     """Yaw +-35 to 65 deg, pitch +-10 to 25 deg about -15 to 5, roll +-15 to 40 deg; the centre sways
     within the part of the view the object leaves free (10 to 50 % of it across, 10 to 40 % up and down)
-    and +-0 to 50 mm in depth."""
+    and +-0 to 50 mm in depth. The gripper comes from above (approach -20 to 10 deg) or, half of the
+    time, from behind the object (approach -100 to -60 deg)."""
     free_x = max(distance * tan_half[0] - 0.6 * size - 0.03, 0.0)
     free_y = max(distance * tan_half[1] - 0.6 * size - 0.03, 0.0)
     amplitude = (free_x * rng.uniform(0.1, 0.5), free_y * rng.uniform(0.1, 0.4), rng.uniform(0.0, 0.05))
     center = (rng.uniform(-0.3, 0.3) * (free_x - amplitude[0]), rng.uniform(-0.1, 0.4) * (free_y - amplitude[1]),
               distance)
     return Motion(center, amplitude, (rng.uniform(35, 65), rng.uniform(10, 25), rng.uniform(15, 40)),
-                  rng.uniform(-15, 5), per_frame_deg, tuple(rng.uniform(0, 2 * np.pi, 4)))
+                  rng.uniform(-15, 5), per_frame_deg, tuple(rng.uniform(0, 2 * np.pi, 4)),
+                  rng.uniform(-100, -60) if rng.uniform() < 0.5 else rng.uniform(-20, 10))
 
 
 def random_trajectory(k: np.ndarray, m: Motion) -> np.ndarray:
@@ -385,7 +400,8 @@ def random_trajectory(k: np.ndarray, m: Motion) -> np.ndarray:
     angles = np.radians(np.column_stack([m.amplitude_deg[0] * np.sin(omega * k + p[0]),
                                          m.amplitude_deg[1] * np.cos(0.7 * omega * k + p[1]) + m.pitch_offset_deg,
                                          m.amplitude_deg[2] * np.sin(0.45 * omega * k + p[2])]))
-    rotations = Rotation.from_euler("yxz", angles).as_matrix()
+    rotations = Rotation.from_euler("yxz", angles).as_matrix() @ Rotation.from_euler(
+        "x", m.approach_deg, degrees=True).as_matrix()
     translations = np.asarray(m.center) + np.column_stack([
         m.amplitude_m[0] * np.sin(0.5 * omega * k + p[3]), m.amplitude_m[1] * np.cos(0.41 * omega * k + p[3]),
         m.amplitude_m[2] * np.sin(0.29 * omega * k + p[1])])

@@ -115,8 +115,7 @@ def build_world(o: SimulationOptions, render_camera, camera) -> World:
     d = draw_parameters(o)
     size = d.size_mm / 1000
     obj, half_width = make_random_object(d.shape, size, d.object_albedo, _stream(o.seed, "object"))
-    object_top = min(p.vertices[:, 1].min() for p in obj.polygons)
-    gripper = make_random_gripper(half_width, object_top, _stream(o.seed, "gripper"))
+    gripper = make_random_gripper(obj, half_width, _stream(o.seed, "gripper"))
     moving = Mesh.of(obj.polygons + gripper.polygons)
     edges = [(a, b, "object", k) for a, b, k in obj.edges] + [(a, b, "gripper", k) for a, b, k in gripper.edges]
 
