@@ -174,25 +174,43 @@ def test_non_convex_faces_are_covered_exactly():
     assert not np.any(cap[1:-1, 1:-1] < (cap[:-2, 1:-1] & cap[2:, 1:-1] & cap[1:-1, :-2] & cap[1:-1, 2:]))
 
 
-def test_an_l_hides_what_lies_behind_its_leg():
-    """Seen along its x axis from the leg's side, an L shows only the four edges of the leg's outer face."""
-    w, d = 0.1, 0.06
-    solid = extrude(profile("L", w, w), -d / 2, d / 2, np.full(8, 0.8))
+def _visibility(solid, T, camera, supersample=4):
     mesh = Mesh.of(solid.polygons)
-    R = np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])  # object x -> camera z
-    assert np.isclose(np.linalg.det(R), 1.0)
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = R, [0.0, 0.0, 0.5 + w / 2]
-    camera = PinholeCamera(300.0, 300.0, 79.5, 59.5, 160, 120)
-    buffers = Buffers.empty(camera, 4)
-    draw(buffers, mesh, T, camera, 4, np.array([0.0, 0.0, -1.0]), 1.0)
-    image = cv2.resize(buffers.color, (160, 120), interpolation=cv2.INTER_AREA) * 255
+    buffers = Buffers.empty(camera, supersample)
+    draw(buffers, mesh, T, camera, supersample, np.array([0.0, 0.0, -1.0]), 1.0)
+    image = cv2.resize(buffers.color, (camera.width, camera.height), interpolation=cv2.INTER_AREA) * 255
     a = np.array([e[0] for e in solid.edges])
     b = np.array([e[1] for e in solid.edges])
     counts = [sample_count(p, q) for p, q in zip(a, b)]
     points = np.concatenate([edge_samples(p, q, k) for p, q, k in zip(a, b, counts)])
     tangents = np.repeat((b - a) / np.linalg.norm(b - a, axis=1, keepdims=True), counts, axis=0)
-    visible = visible_samples(points, tangents, T, buffers, mesh, image, camera, 4, 0)
+    owner = np.repeat(np.arange(len(a)), counts)
+    return points, owner, visible_samples(points, tangents, T, buffers, mesh, image, camera, supersample, 0)
+
+
+def test_edges_seen_end_on_are_not_seen():
+    """Edges on an image step, unoccluded, 3 and 8 degrees off their viewing rays: only the second is seen."""
+    camera = PinholeCamera(300.0, 300.0, 79.5, 59.5, 160, 120)
+    image = np.zeros((120, 160), np.float32)
+    image[:, 80:] = 200.0  # a vertical step between columns 79 and 80, at u = 79.5
+    ray = np.array([0.0, 0.0, 1.0])
+    for angle, seen in ((3.0, False), (8.0, True)):
+        d = np.array([0.0, np.sin(np.radians(angle)), np.cos(np.radians(angle))])
+        points = 0.5 * ray + np.linspace(0.0, 0.02, 5)[:, None] * d  # on the optical axis: u = 79.5
+        visible = visible_samples(points, np.repeat(d[None], 5, axis=0), np.eye(4), Buffers.empty(camera, 4),
+                                  Mesh.of([]), image, camera, 4, 0)
+        assert visible.all() == seen and visible.any() == seen, angle
+
+
+def test_an_l_hides_what_lies_behind_its_leg():
+    """Seen along its x axis from the leg's side, an L shows only the four edges of the leg's outer face."""
+    w, d = 0.1, 0.06
+    solid = extrude(profile("L", w, w), -d / 2, d / 2, np.full(8, 0.8))
+    R = np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])  # object x -> camera z
+    assert np.isclose(np.linalg.det(R), 1.0)
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, [0.0, 0.0, 0.5 + w / 2]
+    points, _, visible = _visibility(solid, T, PinholeCamera(300.0, 300.0, 79.5, 59.5, 160, 120))
     on_near_face = np.abs(points[:, 0] + w / 2) < 1e-9
     behind = points[:, 0] > -w / 2 + 0.004
     assert visible[on_near_face].mean() > 0.95

@@ -7,6 +7,8 @@ at the supersampled pixel the sample projects to (nearest pixel centre):
   (within 0.2 mm: the sample's own face or the other face of its crease, or a
   decal on one), or is no nearer than the sample minus 1 mm (the sample is on a
   silhouette over what lies behind);
+- not seen end-on: the edge makes at least ``MIN_VIEW_ANGLE_DEG`` with the
+  sample's viewing ray (an edge pointing at the camera draws no line);
 - on a grey-level step: in the camera's noise-free image (after shading,
   exposure and blur, before noise) the grey levels 2 px to either side of the
   projected edge differ by at least ``MIN_STEP_GREY``.
@@ -35,6 +37,7 @@ from .simulate import (FRAME_PERIOD_NS, RAW_MARGIN_PX, START_NS, SimulationOptio
 MIN_STEP_GREY = 6.0
 STEP_OFFSET_PX = 2.0
 COPLANAR_M = 2e-4
+MIN_VIEW_ANGLE_DEG = 5.0
 OCCLUSION_TOLERANCE_M = 0.001
 STREAMS = {"draws": 1, "object": 2, "gripper": 3, "background": 4, "clutter": 5, "motion": 6, "light": 7,
            "noise": 8, "calibration": 9}
@@ -152,7 +155,10 @@ def visible_samples(points_obj: np.ndarray, tangents_obj: np.ndarray, T_cam_obj:
                     moving: Mesh, image: np.ndarray, camera, supersample: int, margin: int) -> np.ndarray:
     """(M,) bool: samples (object frame, metres) visible in one camera (module docstring); ``image``
     the noise-free (H, W) float32 grey levels of that camera with ``margin`` px on each side."""
-    z, u, v, ok = project_inside(transform_points(T_cam_obj, points_obj), camera)
+    p = transform_points(T_cam_obj, points_obj)
+    z, u, v, ok = project_inside(p, camera)
+    along = np.abs(np.sum((tangents_obj @ T_cam_obj[:3, :3].T) * p, axis=1)) / np.linalg.norm(p, axis=1)
+    ok &= along < np.cos(np.radians(MIN_VIEW_ANGLE_DEG))
     S = supersample
     H, W = buffers.depth.shape
     cols = np.clip(np.round((u + margin + 0.5) * S - 0.5).astype(int), 0, W - 1)
@@ -160,8 +166,11 @@ def visible_samples(points_obj: np.ndarray, tangents_obj: np.ndarray, T_cam_obj:
     winner, depth = buffers.ids[rows, cols], buffers.depth[rows, cols]
     behind = depth >= z - OCCLUSION_TOLERANCE_M
     own = (winner >= 0) & (winner < len(moving.albedo))
-    face = np.where(own, winner, 0)
-    coplanar = own & (np.abs(np.sum(moving.normals[face] * points_obj, axis=1) - moving.offsets[face]) < COPLANAR_M)
+    coplanar = np.zeros(len(z), bool)
+    mine = np.flatnonzero(own)
+    face = winner[mine]
+    distance = np.sum(moving.normals[face] * points_obj[mine], axis=1) - moving.offsets[face]
+    coplanar[mine] = np.abs(distance) < COPLANAR_M
     ok &= behind | coplanar
     # the image normal of the projected edge, from a point 1 mm along it
     q = transform_points(T_cam_obj, points_obj + 0.001 * tangents_obj)
