@@ -314,11 +314,13 @@ def _behind(polygons: list, near: float) -> list:
 
 
 def make_clutter(rng: np.random.Generator, distance: float, moving_boxes: np.ndarray, tan_half, mean: float) -> list:
-    """Static solids (a list of polygon lists, camera frame) at the object's depth (``distance`` +- 0.12 m) beside, above and below its path.
+    """Static solids (a list of polygon lists, camera frame) at the object's depth (``distance`` +- 0.12 m)
+    beside, above and below its path.
 
     ``moving_boxes`` (F, 2, 3): per frame the axis-aligned box (min, max corners, camera frame) around the
-    object and gripper; a solid whose box comes within 5 mm of any of them is drawn again (up to 40 times).
-    Solids: boxes and extruded profiles 30 to 150 mm, and rails (long bars above or below the path).
+    object and gripper; a solid whose box comes within 5 mm of any of them is drawn again (40 draws per
+    wanted solid in all, so a crowded path may get fewer). Solids: boxes and extruded profiles 30 to 150 mm,
+    and rails (long bars above or below the path).
     """
     lo, hi = moving_boxes[:, 0].min(axis=0), moving_boxes[:, 1].max(axis=0)
     polygons, placed = [], 0

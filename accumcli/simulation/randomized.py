@@ -32,7 +32,8 @@ from .random_scene import (BACKGROUNDS, RANDOM_SHAPES, draw_lighting, draw_motio
                            make_random_gripper, make_random_object, random_trajectory)
 from .raster import Buffers, Mesh, draw
 from .simulate import (FRAME_PERIOD_NS, RAW_MARGIN_PX, START_NS, SimulationOptionError, SimulationOptions,
-                       SimulationResult, _calibrations, _interpolate_at, _rectified_camera, _write_poses, project_inside)
+                       SimulationResult, _calibrations, _interpolate_at, _rectified_camera, _write_poses,
+                       project_inside)
 
 MIN_STEP_GREY = 6.0
 STEP_OFFSET_PX = 2.0

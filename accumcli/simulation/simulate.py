@@ -48,7 +48,8 @@ class SimulationOptionError(AccumError, ValueError):
 class SimulationOptions:
     """What to render. ``scene="classic"`` (the default) is the original fixed scene: a box, prism or
     house (``shape``, default box) of about 100 mm at about 0.5 m before a wall with rectangles at 1.1 m,
-    noise 2.0 and blur 0.6 px unless given, 9.8 deg per frame. Its bytes do not change with this class.
+    noise 2.0 and blur 0.6 px unless given, 9.8 deg per frame; its recordings are byte for byte those of
+    the simulator before the random scene existed (the committed sample regenerates unchanged).
 
     ``scene="random"`` draws every field left None from the seed (each from its own stream, so pinning
     one leaves the others' draws unchanged):
@@ -68,10 +69,13 @@ class SimulationOptions:
     - ``background``: uniform among "texture", "planes", "lines" (see ``random_scene``);
     - ``clutter``: True with probability 0.3: 4 to 8 static solids at the object's depth (+-0.12 m)
       beside, above and below its path, never within 5 mm of the object or gripper;
-    - ``per_frame_deg``: the peak yaw rate, U(6, 12) deg per frame.
-    A two-finger gripper with palm and wrist (grey levels U(0.15, 0.8)) holds the object; its edges are
-    in the truth (``part`` "gripper"). Random scenes are rendered by the triangle z-buffer
-    (``raster.py``) and their truth counts a sample as seen on a grey-level step of at least 6.
+    - ``per_frame_deg``: the peak yaw rate, U(6, 12) deg per frame (motion in ``random_scene.draw_motion``:
+      yaw, pitch and roll swings, the gripper coming from above or, half of the time, from behind).
+    A two-finger gripper with palm and wrist sized to the object (grey levels U(0.15, 0.8)) holds it; its
+    edges are in the truth (``part`` "gripper", ``kind`` "crease"; the object's are "crease" or "paint").
+    Random scenes are rendered by the triangle z-buffer (``raster.py``); their truth's ``seen`` follows
+    the rule in ``randomized.py`` (unoccluded in the z-buffer, inside both images, a grey-level step of
+    at least 6 in both noise-free images).
     """
 
     frames: int = 36
