@@ -241,3 +241,26 @@ def test_bad_random_options_say_what_to_do(tmp_path):
         simulate(str(tmp_path / "x.mcap"), SimulationOptions(frames=1, size_mm=40.0))
     with pytest.raises(AccumError, match="distance_m = 9.0 is out of range; use 0.25 to 3.0"):
         simulate(str(tmp_path / "x.mcap"), SimulationOptions(**SMALL, distance_m=9.0))
+
+
+def _lefts(path) -> np.ndarray:
+    with Recording(str(path)) as rec:
+        return np.array([frame.left.astype(float) for frame in rec.frames()])
+
+
+def test_pinned_blur_and_illumination_act_on_the_images(tmp_path):
+    base = SimulationOptions(frames=3, width=160, height=120, scene="random", seed=8, noise_sigma=0.0,
+                             illumination=0.0, shape="box")
+    for name, options in (("sharp", dataclasses.replace(base, blur_sigma=0.0)),
+                          ("blurred", dataclasses.replace(base, blur_sigma=1.1)),
+                          ("drifting", dataclasses.replace(base, blur_sigma=0.0, illumination=0.2))):
+        simulate(str(tmp_path / f"{name}.mcap"), options)
+    sharp, blurred, drifting = (_lefts(tmp_path / f"{n}.mcap") for n in ("sharp", "blurred", "drifting"))
+    # the blurred recording is the sharp one blurred with sigma 1.1 px (up to 8-bit rounding)
+    reblurred = np.array([cv2.GaussianBlur(image, (0, 0), 1.1) for image in sharp])
+    assert np.abs(reblurred - blurred)[:, 5:-5, 5:-5].max() <= 1.0
+    assert np.abs(np.diff(sharp, axis=2)).mean() > 1.3 * np.abs(np.diff(blurred, axis=2)).mean()
+    # without drift the background corner holds still; with drift its exposure changes
+    corner = (slice(None), slice(0, 12), slice(0, 12))
+    assert np.ptp(sharp[corner], axis=0).max() == 0
+    assert np.abs(np.diff(drifting[corner], axis=0)).mean() > 2.0
