@@ -49,12 +49,12 @@ class EdgeSamples:
 
     @classmethod
     def of(cls, truth: Truth, tol: Tolerances = Tolerances()) -> "EdgeSamples":
+        from .edge_sampling import edge_samples, sample_count
+
         points, owner, counted = [], [], []
         for i, (a, b, seen, use) in enumerate(zip(truth.a, truth.b, truth.seen, truth.for_completeness)):
-            k = len(seen) if seen is not None and len(seen) else max(2, int(np.ceil(np.linalg.norm(b - a) /
-                                                                                    tol.sample_spacing)))
-            s = (np.arange(k) + 0.5) / k
-            points.append(a + s[:, None] * (b - a))
+            k = len(seen) if seen is not None and len(seen) else sample_count(a, b, tol.sample_spacing)
+            points.append(edge_samples(a, b, k))
             owner.append(np.full(k, i))
             ok = np.full(k, bool(use))
             if seen is not None and len(seen):

@@ -24,13 +24,15 @@ class Polygon:
     """A planar convex polygon. vertices: (K, 3) metres, counter-clockwise seen
     from outside; normal: (3,) outward unit; albedo in [0, 1]. ``decal`` polygons
     are painted on another polygon's surface and win its depth test; ``cull``
-    polygons are invisible from behind (faces of closed solids)."""
+    polygons are invisible from behind (faces of closed solids). Only the triangle
+    renderer (``raster.py``) draws non-convex polygons and ``texture``."""
 
     vertices: np.ndarray
     normal: np.ndarray
     albedo: float
     cull: bool = True
     decal: bool = False
+    texture: object = None  # raster.Texture (random scenes only)
 
 
 @dataclass
@@ -80,14 +82,15 @@ def _clip_convex(vertices: np.ndarray, normal: np.ndarray, offset: float) -> np.
     return np.array(out)
 
 
-def _stripe(face: Polygon, across: np.ndarray, lo: float, hi: float, albedo: float) -> tuple[Polygon, list]:
-    """A painted band ``lo <= x . across <= hi`` on a face, and its two boundary edges."""
+def _stripe(face: Polygon, across: np.ndarray, lo: float, hi: float, albedo: float,
+            kind: str = "stripe") -> tuple[Polygon, list]:
+    """A painted band ``lo <= x . across <= hi`` on a face, and its two boundary edges (of ``kind``)."""
     band = _clip_convex(_clip_convex(face.vertices, across, hi), -across, -lo)
     edges = []
     for level in (lo, hi):
         on = band[np.abs(band @ across - level) < 1e-9]
         if len(on) >= 2:
-            edges.append((on[0], on[-1], "stripe"))
+            edges.append((on[0], on[-1], kind))
     return Polygon(band, face.normal, albedo, cull=True, decal=True), edges
 
 
@@ -131,17 +134,38 @@ def _area(section: np.ndarray) -> float:
     return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
 
 
-def make_gripper(half_width: float, object_top: float) -> Part:
-    """Two fingers clamping the object at x = +-half_width, a palm and a wrist above it (towards -y)."""
+@dataclass(frozen=True)
+class GripperSize:
+    """Gripper dimensions in metres (object frame): finger thickness (x) and depth (z), how far below the
+    object's centre the fingers reach (y), the gap from the object's top to the palm, the palm's height
+    and depth, the wrist's width, depth and length. The defaults are the classic scene's."""
+
+    finger: float = 0.012
+    finger_depth: float = 0.026
+    reach: float = 0.012
+    gap: float = 0.025
+    palm: float = 0.024
+    palm_depth: float = 0.05
+    wrist: float = 0.05
+    wrist_length: float = 0.2
+
+
+def make_gripper(half_width: float, object_top: float, albedos: tuple = (0.35, 0.5, 0.6),
+                 size: GripperSize = GripperSize()) -> Part:
+    """Two fingers clamping the object at x = +-half_width, a palm and a wrist above it (towards -y);
+    ``albedos`` of the fingers, the palm and the wrist."""
     part = Part()
-    palm_y = object_top - 0.025
+    g = size
+    palm_y = object_top - g.gap
     for sign in (-1, 1):
-        finger = _box((sign * (half_width + 0.006), (palm_y + 0.012) / 2, 0.0), (0.012, 0.012 - palm_y, 0.026),
-                      0.35, "gripper")
+        finger = _box((sign * (half_width + g.finger / 2), (palm_y + g.reach) / 2, 0.0),
+                      (g.finger, g.reach - palm_y, g.finger_depth), albedos[0], "gripper")
         part.polygons += finger.polygons
         part.edges += finger.edges
-    palm = _box((0.0, palm_y - 0.012, 0.0), (2 * half_width + 0.036, 0.024, 0.05), 0.5, "gripper")
-    wrist = _box((0.0, palm_y - 0.024 - 0.1, 0.0), (0.05, 0.2, 0.05), 0.6, "gripper")
+    palm = _box((0.0, palm_y - g.palm / 2, 0.0), (2 * half_width + 3 * g.finger, g.palm, g.palm_depth), albedos[1],
+                "gripper")
+    wrist = _box((0.0, palm_y - g.palm - g.wrist_length / 2, 0.0), (g.wrist, g.wrist_length, g.wrist), albedos[2],
+                 "gripper")
     for piece in (palm, wrist):
         part.polygons += piece.polygons
         part.edges += piece.edges

@@ -19,13 +19,15 @@ the written gripper poses (RMS degrees, RMS metres) while the truth stays exact.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..atomic import atomic_open
+from ..errors import AccumError
+from ..edge_sampling import SAMPLE_SPACING_M, edge_samples, sample_count
 from ..geometry import interpolate, make_transform, quat_from_transform, transform_points, unit
 from ..recording import CameraCalibration, RecordingWriter, Topics
 from .render import PinholeCamera, empty_layer, finish_image, rasterize, reduce
@@ -33,18 +35,53 @@ from .scene import SHAPES, make_background, make_gripper, make_object, trajector
 
 START_NS = 1_750_000_000 * 1_000_000_000
 FRAME_PERIOD_NS = 100_000_000
-SAMPLE_SPACING_M = 0.002
 MIN_STEP = 10.0 / 255.0
 OCCLUSION_TOLERANCE_M = 0.004
 RAW_MARGIN_PX = 40
 
 
+class SimulationOptionError(AccumError, ValueError):
+    """An option of the simulator that cannot be used (unknown shape, a value out of range)."""
+
+
 @dataclass(frozen=True)
 class SimulationOptions:
+    """What to render. ``scene="classic"`` (the default) is the original fixed scene: a box, prism or
+    house (``shape``, default box) of about 100 mm at about 0.5 m before a wall with rectangles at 1.1 m,
+    noise 2.0 and blur 0.6 px unless given, 9.8 deg per frame; its recordings are byte for byte those of
+    the simulator before the random scene existed (the committed sample regenerates unchanged).
+
+    ``scene="random"`` draws every field left None from the seed (each from its own stream, so pinning
+    one leaves the others' draws unchanged):
+
+    - ``shape``: uniform among ``RANDOM_SHAPES`` (box, prism (hexagonal), wedge, trapezoid, house,
+      and the non-convex L, T, U, steps, cross), extruded; width : height : depth drawn as
+      1 : U(0.55, 1) : U(0.35, 1);
+    - ``size_mm``: the object's largest dimension, U(30, 120) mm;
+    - ``distance_m``: the depth of the object's path centre, U(0.45, 0.85) m;
+    - ``contrast``: |object albedo - background mean albedo|, U(0.05, 0.45); background mean U(0.25,
+      0.75), the sign drawn (flipped if the object would leave [0.05, 0.95]); each face x U(0.8, 1.2);
+      0 to 4 painted bands or windows at +-U(0.15, 0.4) from their face;
+    - ``blur_sigma``: Gaussian optics blur, U(0.5, 1.2) px; ``noise_sigma``: U(0.5, 2.5) grey levels;
+    - ``illumination``: drift amplitude U(0, 0.2): exposure gain 1 +- it, offset +- 30 x it grey levels,
+      the light turning by up to 200 x it deg over the sequence; faces are shaded by their normal
+      (Lambert, ambient U(0.3, 0.6), light from the camera's side, azimuth +-45, elevation 10 to 60 deg);
+    - ``background``: uniform among "texture", "planes", "lines" (see ``random_scene``);
+    - ``clutter``: True with probability 0.3: 4 to 8 static solids at the object's depth (+-0.12 m)
+      beside, above and below its path, never within 5 mm of the object or gripper;
+    - ``per_frame_deg``: the peak yaw rate, U(6, 12) deg per frame (motion in ``random_scene.draw_motion``:
+      yaw, pitch and roll swings, the gripper coming from above or, half of the time, from behind).
+    A two-finger gripper with palm and wrist sized to the object (grey levels U(0.15, 0.8)) holds it; its
+    edges are in the truth (``part`` "gripper", ``kind`` "crease"; the object's are "crease" or "paint").
+    Random scenes are rendered by the triangle z-buffer (``raster.py``); their truth's ``seen`` follows
+    the rule in ``randomized.py`` (unoccluded in the z-buffer, inside both images, a grey-level step of
+    at least 6 in both noise-free images).
+    """
+
     frames: int = 36
     width: int = 640
     height: int = 480
-    shape: str = "box"
+    shape: str | None = None
     seed: int = 0
     raw: bool = False
     tf_tree: bool = False
@@ -52,10 +89,37 @@ class SimulationOptions:
     pose_noise_m: float = 0.0
     encoding: str = "png"
     baseline: float = 0.08
-    noise_sigma: float = 2.0
-    blur_sigma: float = 0.6
+    noise_sigma: float | None = None
+    blur_sigma: float | None = None
     supersample: int = 4
-    per_frame_deg: float = 9.8
+    per_frame_deg: float | None = None
+    scene: str = "classic"
+    size_mm: float | None = None
+    distance_m: float | None = None
+    contrast: float | None = None
+    illumination: float | None = None
+    background: str | None = None
+    clutter: bool | None = None
+
+
+CLASSIC_FIELDS = ("frames", "width", "height", "shape", "seed", "raw", "tf_tree", "pose_noise_deg", "pose_noise_m",
+                  "encoding", "baseline", "noise_sigma", "blur_sigma", "supersample", "per_frame_deg")
+RANDOM_ONLY = ("size_mm", "distance_m", "contrast", "illumination", "background", "clutter")
+SCENES = ("classic", "random")
+
+
+def _classic(o: SimulationOptions) -> SimulationOptions:
+    """The classic scene's options with its defaults filled in; random-only options refused."""
+    pinned = [name for name in RANDOM_ONLY if getattr(o, name) is not None]
+    if pinned:
+        raise SimulationOptionError(f"{', '.join(pinned)} only apply to scene='random'; "
+                                    f"add scene='random' (accum simulate --scene random)")
+    if o.shape is not None and o.shape not in SHAPES:
+        raise SimulationOptionError(f"unknown shape {o.shape!r} for the classic scene (expected one of "
+                                    f"{', '.join(SHAPES)}); the random scene has more")
+    return replace(o, shape=o.shape or "box", noise_sigma=2.0 if o.noise_sigma is None else o.noise_sigma,
+                   blur_sigma=0.6 if o.blur_sigma is None else o.blur_sigma,
+                   per_frame_deg=9.8 if o.per_frame_deg is None else o.per_frame_deg)
 
 
 @dataclass
@@ -103,23 +167,29 @@ def _sample_edges(edges: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Edge samples at ``a + (i + 0.5) / k (b - a)``: points (M, 3), tangents (M, 3), edge index (M,)."""
     points, tangents, owner = [], [], []
     for index, (a, b, _) in enumerate(edges):
-        k = max(2, int(np.ceil(np.linalg.norm(b - a) / SAMPLE_SPACING_M)))
-        s = (np.arange(k) + 0.5) / k
-        points.append(a + s[:, None] * (b - a))
+        k = sample_count(a, b, SAMPLE_SPACING_M)
+        points.append(edge_samples(a, b, k))
         tangents.append(np.repeat(unit((b - a)[None]), k, axis=0))
         owner.append(np.full(k, index))
     return np.concatenate(points), np.concatenate(tangents), np.concatenate(owner)
 
 
-def _visible(points_cam: np.ndarray, tangents_cam: np.ndarray, camera: PinholeCamera, depth_min: np.ndarray,
-             clean: np.ndarray, supersample: int, margin: int) -> np.ndarray:
-    """(M,) bool: samples in front, inside the image, unoccluded and on a grey-level step."""
+def project_inside(points_cam: np.ndarray, camera: PinholeCamera):
+    """Depth z (M,) metres, pixel (u, v) (M,) each, and (M,) bool: in front (z > 5 cm) and at least 3 px
+    inside the image, of points (M, 3) in the camera frame."""
     z = points_cam[:, 2]
     ok = z > 0.05
     zs = np.where(ok, z, 1.0)
     u = camera.fx * points_cam[:, 0] / zs + camera.cx
     v = camera.fy * points_cam[:, 1] / zs + camera.cy
     ok &= (u >= 3) & (u <= camera.width - 4) & (v >= 3) & (v <= camera.height - 4)
+    return z, u, v, ok
+
+
+def _visible(points_cam: np.ndarray, tangents_cam: np.ndarray, camera: PinholeCamera, depth_min: np.ndarray,
+             clean: np.ndarray, supersample: int, margin: int) -> np.ndarray:
+    """(M,) bool: samples in front, inside the image, unoccluded and on a grey-level step."""
+    z, u, v, ok = project_inside(points_cam, camera)
     S = supersample
     us = np.clip(np.round((u + margin + 0.5) * S - 0.5).astype(int), 0, depth_min.shape[1] - 1)
     vs = np.clip(np.round((v + margin + 0.5) * S - 0.5).astype(int), 0, depth_min.shape[0] - 1)
@@ -144,9 +214,13 @@ def simulate(output: str, options: SimulationOptions = SimulationOptions(), topi
     list, each frame's (S,) bool array of visible edge samples (in the truth's
     sample order) is appended to it, for measuring single stages per frame.
     """
-    o = options
-    if o.shape not in SHAPES:
-        raise ValueError(f"unknown shape {o.shape!r}")
+    if options.scene not in SCENES:
+        raise SimulationOptionError(f"unknown scene {options.scene!r} (expected one of {', '.join(SCENES)})")
+    if options.scene == "random":
+        from .randomized import simulate_random
+        return simulate_random(output, options, topics, truth_output or _truth_path(output), progress, visibility)
+    o = _classic(options)
+    meta = {name: getattr(o, name) for name in CLASSIC_FIELDS}
     rng = np.random.default_rng(o.seed)
     camera = _rectified_camera(o)
     margin = RAW_MARGIN_PX if o.raw else 0
@@ -184,7 +258,7 @@ def simulate(output: str, options: SimulationOptions = SimulationOptions(), topi
     kernel = np.ones((3, 3), np.uint8)
     truth_path = truth_output or _truth_path(output)
     with RecordingWriter(output) as writer:
-        writer.metadata("simulation", {**o.__dict__, "generator": "accum simulate"})
+        writer.metadata("simulation", {**meta, "generator": "accum simulate"})
         for side, cal in zip(("left", "right"), calibrations):
             writer.calibration(getattr(topics, f"{side}_calibration"), cal, int(image_times[0]))
         _write_poses(writer, topics, o, tf_times, key_poses, rng)
@@ -211,7 +285,7 @@ def simulate(output: str, options: SimulationOptions = SimulationOptions(), topi
                 visibility.append(visible)
             if progress:
                 progress(i + 1)
-    truth = _truth_document(o, edges, samples, owner, seen, image_times, truth_poses, camera)
+    truth = _truth_document(meta, edges, samples, owner, seen, image_times, truth_poses, camera)
     with atomic_open(truth_path) as f:
         json.dump(truth, f, indent=1)
     counts = seen
@@ -248,7 +322,7 @@ def _write_poses(writer: RecordingWriter, topics: Topics, o: SimulationOptions, 
             writer.transform("camera_left", "gripper", T_cam_obj, int(t_ns), topic=topics.tf)
 
 
-def _truth_document(o, edges, samples, owner, seen, image_times, poses, camera) -> dict:
+def _truth_document(meta: dict, edges, samples, owner, seen, image_times, poses, camera) -> dict:
     doc_edges = []
     for index, (a, b, kind) in enumerate(edges):
         doc_edges.append({"a": [round(float(x), 9) for x in a], "b": [round(float(x), 9) for x in b],
@@ -260,7 +334,7 @@ def _truth_document(o, edges, samples, owner, seen, image_times, poses, camera) 
                           "rotation_xyzw": quat.tolist()})
     return {"format": "accum.truth/1", "object_frame": "gripper", "camera_frame": "camera_left",
             "edges": doc_edges, "poses": doc_poses,
-            "simulation": {**o.__dict__, "fx": camera.fx, "cx": camera.cx, "cy": camera.cy,
+            "simulation": {**meta, "fx": camera.fx, "cx": camera.cx, "cy": camera.cy,
                            "sample_spacing_m": SAMPLE_SPACING_M, "min_step_grey": MIN_STEP * 255,
                            "edge_kinds": {"object": "edge of the object's polyhedron",
                                           "stripe": "boundary of a painted stripe on the object",
