@@ -41,7 +41,7 @@ figures: $(VENV)/.installed
 
 # Regenerate the committed synthetic sample (deterministic: same bytes for the same seed).
 sample: $(VENV)/.installed
-	$(BIN)/accum simulate -o $(SAMPLE) --count 36 --seed 0 --shape box --encoding jpeg
+	$(BIN)/accum simulate -o $(SAMPLE) --scene classic --count 36 --seed 0 --shape box --encoding jpeg
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

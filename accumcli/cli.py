@@ -174,8 +174,22 @@ def info(recording, options, as_json):
 @click.option("--count", type=click.IntRange(min=1), default=36, show_default=True, help="Stereo frames.")
 @click.option("--size", default="640x480", show_default=True, help="Image size WIDTHxHEIGHT.",
               callback=library_value(lambda text: number_pair(text.lower(), "x", "WIDTHxHEIGHT")))
-@click.option("--shape", type=click.Choice(["box", "prism", "house"]), default="box", show_default=True)
+@click.option("--scene", type=click.Choice(["random", "classic"]), default="random", show_default=True,
+              help="random: everything below not given is drawn from the seed; classic: the original box/prism/house "
+                   "scene.")
+@click.option("--shape", type=click.Choice(sorted({"box", "prism", "house", "wedge", "trapezoid", "L", "T", "U",
+                                                   "steps", "cross"})), help="[default: drawn; classic: box]")
 @click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--size-mm", type=click.FloatRange(10, 300), help="Largest dimension of the object [drawn: 30 to 120].")
+@click.option("--distance", type=click.FloatRange(0.2, 3.0), help="Depth of the object's path, m [drawn: 0.45 to 0.85].")
+@click.option("--contrast", type=click.FloatRange(0.0, 0.9), help="Object against background albedo [drawn: 0.05 to "
+              "0.45].")
+@click.option("--blur", type=click.FloatRange(0.0, 5.0), help="Optics blur sigma, px [drawn: 0.5 to 1.2].")
+@click.option("--noise", type=click.FloatRange(0.0, 20.0), help="Image noise, grey levels [drawn: 0.5 to 2.5].")
+@click.option("--illumination", type=click.FloatRange(0.0, 0.5), help="Lighting drift over the sequence [drawn: 0 "
+              "to 0.2].")
+@click.option("--background", type=click.Choice(["texture", "planes", "lines"]), help="[default: drawn]")
+@click.option("--clutter/--no-clutter", default=None, help="Static solids at the object's depth [drawn: 30 %].")
 @click.option("--raw", is_flag=True, help="Distorted, unrectified images (the calibration rectifies them).")
 @click.option("--tf-tree", is_flag=True, help="world -> camera_left static plus world -> gripper at 3x the image "
               "rate, offset in time.")
@@ -183,15 +197,16 @@ def info(recording, options, as_json):
               callback=library_value(lambda text: number_pair(text, ",", "DEG,MM such as 1.5,4")),
               help="RMS rotation (degrees) and translation (mm) noise on the recorded gripper poses.")
 @click.option("--encoding", type=click.Choice(["png", "jpeg", "mono8"]), default="png", show_default=True)
-def simulate(output, count, size, shape, seed, raw, tf_tree, pose_noise, encoding):
+def simulate(output, count, size, scene, shape, seed, size_mm, distance, contrast, blur, noise, illumination,
+             background, clutter, raw, tf_tree, pose_noise, encoding):
     """Render a synthetic stereo recording with ground truth.
 
     \b
-    Example:
-      accum simulate -o out/prism.mcap --shape prism --seed 3 --count 12
+    Examples:
+      accum simulate -o out/rec.mcap --seed 3 --count 12
+      accum simulate -o out/t.mcap --shape T --clutter --noise 2 --count 24
     """
-    from .simulation import SimulationOptions
-    from .simulation import simulate as run
+    from .simulation import SimulationOptions, simulate as run
 
     width, height = int(size[0]), int(size[1])
     if width < 64 or height < 48 or width > 8192 or height > 8192:
@@ -200,7 +215,9 @@ def simulate(output, count, size, shape, seed, raw, tf_tree, pose_noise, encodin
         raise click.BadParameter(f"expected a name ending in .mcap, found {output!r}", param_hint="--output")
     options = SimulationOptions(frames=count, width=width, height=height, shape=shape, seed=seed, raw=raw,
                                 tf_tree=tf_tree, pose_noise_deg=pose_noise[0], pose_noise_m=pose_noise[1] / 1000,
-                                encoding=encoding)
+                                encoding=encoding, scene=scene, size_mm=size_mm, distance_m=distance,
+                                contrast=contrast, blur_sigma=blur, noise_sigma=noise, illumination=illumination,
+                                background=background, clutter=clutter)
     update, finish = progress_callback("rendering")
     try:
         result = run(output, options, progress=lambda done: update(done, count))

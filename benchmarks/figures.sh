@@ -7,7 +7,7 @@ A=${ACCUM:-.venv/bin/accum}
 O=out/figures
 mkdir -p "$O"
 run() { echo "\$ $*"; "$@"; echo; }
-sim() { [ -f "$O/$1.mcap" ] || "$A" -q simulate -o "$O/$1.mcap" "${@:2}" > /dev/null; }
+sim() { [ -f "$O/$1.mcap" ] || "$A" -q simulate --scene classic -o "$O/$1.mcap" "${@:2}" > /dev/null; }
 
 sim prism --shape prism --seed 1
 sim house --shape house --seed 2
