@@ -104,3 +104,13 @@ def test_transformed_moves_centres_and_directions_and_keeps_extra_columns():
     assert moved.frame_id == "camera" and np.allclose(moved.centers, [[0.0, 0.0, 0.5]] * 2)
     assert np.allclose(moved.directions, [[-1.0, 0.0, 0.0]] * 2)
     assert moved.extra["view_direction"] is segments.extra["view_direction"]
+
+
+def test_check_transform_projects_a_slightly_drifted_rotation_back_onto_a_rotation():
+    from accumcli.geometry import check_transform
+
+    T = np.eye(4)
+    T[:3, :3] += 3e-5 * np.array([[0, 1, 0], [0, 0, 0], [0, 0, 0]])   # what chained estimates drift to
+    out = check_transform(T)
+    assert np.abs(out[:3, :3].T @ out[:3, :3] - np.eye(3)).max() < 1e-12
+    assert np.abs(out - T).max() < 1e-4

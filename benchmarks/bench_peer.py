@@ -1,0 +1,53 @@
+"""Whole runs against a peer in the same process: OpenCV's StereoSGBM (64 disparities, block 5)
+reading the same recording, one thread, versus ``extract_recording``, ``accumulate_recording`` and
+``track_recording`` (one worker, then two for extraction and accumulation).
+
+Targets (issues 9, 10): extract >= 1.5x and accumulate >= 1.3x SGBM's pairs per second; tracking
+>= 30 frames/s at 640x480 on one core.
+"""
+
+from __future__ import annotations
+
+from common import ROOT, recording, run_child
+
+PEER = """
+import os, tempfile, time, cv2
+cv2.setNumThreads(1)
+from accumcli.recording import Recording
+from accumcli.runs import FrameRange, accumulate_recording, extract_recording, track_recording
+path = {path!r}
+sgbm = cv2.StereoSGBM_create(minDisparity=0, numDisparities=64, blockSize=5)
+t0 = time.perf_counter()
+n = 0
+with Recording(path) as rec:
+    for frame in rec.frames():
+        sgbm.compute(frame.left, frame.right)
+        n += 1
+RESULT = {{'sgbm': n / (time.perf_counter() - t0)}}
+out = tempfile.mkdtemp()
+for workers in (1, 2):
+    r = extract_recording(path, os.path.join(out, 'f.jsonl'), workers=workers)
+    RESULT[f'extract_{{workers}}'] = r.pairs_per_second
+    r = accumulate_recording(path, [os.path.join(out, 'm.json')], workers=workers)
+    RESULT[f'accumulate_{{workers}}'] = r.pairs_per_second
+model = accumulate_recording({track_path!r}, frames=FrameRange(0, 20)).model
+RESULT['track'] = track_recording(model, {track_path!r}).frames_per_second
+"""
+
+
+def main() -> dict:
+    sample = str(ROOT / "sample_data" / "sim_box.mcap")
+    track = recording("track_60", frames=60, width=640, height=480, seed=5)
+    r = run_child(PEER.format(path=sample, track_path=track))
+    sgbm = r["sgbm"]
+    print(f"peer        StereoSGBM (64 disparities, block 5) reading the sample: {sgbm:.1f} pairs/s, one thread")
+    for name, target in (("extract", 1.5), ("accumulate", 1.3)):
+        one, two = r[f"{name}_1"], r[f"{name}_2"]
+        print(f"peer        {name:<10} {one:5.1f} pairs/s = {one / sgbm:.2f}x SGBM (target >= {target}x); "
+              f"--workers 2: {two:5.1f} pairs/s ({two / one:.2f}x one worker)")
+    print(f"peer        track      {r['track']:5.1f} frames/s = {r['track'] / sgbm:.2f}x SGBM (target >= 30 frames/s)")
+    return r
+
+
+if __name__ == "__main__":
+    main()
