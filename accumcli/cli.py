@@ -181,7 +181,8 @@ def info(recording, options, as_json):
                                                    "steps", "cross"})), help="[default: drawn; classic: box]")
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--size-mm", type=click.FloatRange(10, 300), help="Largest dimension of the object [drawn: 30 to 120].")
-@click.option("--distance", type=click.FloatRange(0.2, 3.0), help="Depth of the object's path, m [drawn: 0.45 to 0.85].")
+@click.option("--distance", type=click.FloatRange(0.2, 3.0),
+              help="Depth of the object's path, m [drawn: 0.45 to 0.85].")
 @click.option("--contrast", type=click.FloatRange(0.0, 0.9), help="Object against background albedo [drawn: 0.05 to "
               "0.45].")
 @click.option("--blur", type=click.FloatRange(0.0, 5.0), help="Optics blur sigma, px [drawn: 0.5 to 1.2].")
@@ -206,7 +207,8 @@ def simulate(output, count, size, scene, shape, seed, size_mm, distance, contras
       accum simulate -o out/rec.mcap --seed 3 --count 12
       accum simulate -o out/t.mcap --shape T --clutter --noise 2 --count 24
     """
-    from .simulation import SimulationOptions, simulate as run
+    from .simulation import SimulationOptions
+    from .simulation import simulate as run
 
     width, height = int(size[0]), int(size[1])
     if width < 64 or height < 48 or width > 8192 or height > 8192:
@@ -261,7 +263,8 @@ def extract(recording, output, rrd, with_2d, frames, extract_params, options):
 @command()
 @path_arg("recording")
 @output_option("outputs", multiple=True, required=True,
-               help="Model to write: .json (the model) and/or .ply (line set); repeatable.")
+               help="Model to write: .json (the model), .ply (line set) and/or .mcap (Foxglove SceneUpdate over "
+                    "time); repeatable.")
 @click.option("--all", "ply_all", is_flag=True, help="The PLY holds every segment, not only the accepted ones.")
 @click.option("--rrd", type=click.Path(dir_okay=False),
               help="Also save a Rerun recording: images, segments, the model by confidence, counts over time.")
@@ -299,8 +302,8 @@ def accumulate(recording, outputs, ply_all, rrd, truth, history, png, panel, mot
     from .runs import accumulate_recording
 
     for path in outputs:
-        if not path.lower().endswith((".json", ".ply")):
-            raise click.BadParameter(f"expected a .json or .ply file, found {path!r}", param_hint="--output")
+        if not path.lower().endswith((".json", ".ply", ".mcap")):
+            raise click.BadParameter(f"expected a .json, .ply or .mcap file, found {path!r}", param_hint="--output")
     line_model = LineModelParams(thresholds=MetricThresholds(position_threshold / 1000.0, angle_threshold))
     params = AccumulateParams(extract=extract_params, line_model=line_model, motion=motion)
     result = run_with_progress("accumulating", accumulate_recording, recording, outputs, params=params,

@@ -7,7 +7,7 @@ import sys
 
 
 def main() -> None:
-    from .outputs import interrupt_on_sigterm   # the standard library and errors.py only
+    from .outputs import interrupt_on_sigterm  # the standard library and errors.py only
 
     interrupt_on_sigterm()
     try:

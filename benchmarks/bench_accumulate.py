@@ -11,7 +11,6 @@ import copy
 import time
 
 import numpy as np
-
 from common import ROOT, recording, run_child
 
 

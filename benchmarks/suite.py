@@ -76,7 +76,12 @@ def real_and_independent_rows() -> list[Row]:
 
 def score(row: Row) -> dict:
     """Extract (with 2D segments), evaluate the frames; accumulate, evaluate the model."""
-    from accumcli.runs import RecordingOptions, accumulate_recording, evaluate_file, extract_recording
+    from accumcli.runs import (
+        RecordingOptions,
+        accumulate_recording,
+        evaluate_file,
+        extract_recording,
+    )
 
     options = RecordingOptions(object_frame=row.object_frame)
     out = CACHE / "suite"

@@ -6,6 +6,7 @@ or to a binary file opened by an ``outputs.OutputSet``, which then owns it."""
 from __future__ import annotations
 
 import contextlib
+import json
 
 import numpy as np
 from mcap_protobuf.writer import Writer
@@ -24,6 +25,7 @@ class RecordingWriter:
         self._stack = contextlib.ExitStack()
         self._file = self._stack.enter_context(opened(target, "wb"))
         self._writer = Writer(self._file)
+        self._json_channels: dict[str, int] = {}
 
     def calibration(self, topic: str, calibration: CameraCalibration, t_ns: int) -> None:
         self._writer.write_message(topic, calibration_to_msg(calibration, t_ns), log_time=t_ns, publish_time=t_ns)
@@ -44,6 +46,18 @@ class RecordingWriter:
         log_time = t_ns if log_time_ns is None else log_time_ns
         self._writer.write_message(topic, transform_to_msg(parent, child, t_ns, translation, quat_xyzw),
                                    log_time=log_time, publish_time=log_time)
+
+    def message(self, topic: str, message, t_ns: int) -> None:
+        """Any protobuf message (e.g. a ``foxglove.SceneUpdate``) on ``topic`` at ``t_ns``."""
+        self._writer.write_message(topic, message, log_time=t_ns, publish_time=t_ns)
+
+    def json_message(self, topic: str, schema_name: str, json_schema: dict, doc: dict, t_ns: int) -> None:
+        """A JSON message (with its JSON schema, so that Foxglove can plot its fields) on ``topic``."""
+        raw = self._writer._writer   # the mcap writer under mcap_protobuf's, for a non-protobuf channel
+        if topic not in self._json_channels:
+            schema_id = raw.register_schema(schema_name, "jsonschema", json.dumps(json_schema).encode())
+            self._json_channels[topic] = raw.register_channel(topic, "json", schema_id)
+        raw.add_message(self._json_channels[topic], log_time=t_ns, data=json.dumps(doc).encode(), publish_time=t_ns)
 
     def metadata(self, name: str, data: dict) -> None:
         self._writer.add_metadata(name, {k: str(v) for k, v in data.items()})

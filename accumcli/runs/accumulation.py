@@ -16,7 +16,7 @@ from ..segments import Segments
 from .base import FrameRange, Progress, RecordingOptions, no_progress, nothing_done
 from .checks import check_truth_matches
 from .parallel import extracted_frames
-from .rerun_sink import rerun_log
+from .frame_logs import rerun_log, scene_log
 
 log = logging.getLogger("accumcli")
 
@@ -53,8 +53,9 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
                          workers: int = 1, progress: Progress = no_progress) -> AccumulationResult:
     """Accumulate the frames in ``frames`` of ``recording`` into one model.
 
-    outputs: model files, ``.json`` (accum.model/1) and/or ``.ply`` (accepted segments; all with
-    ``ply_all``); truth: a truth sidecar path, to score the model frame by frame; history: JSON lines,
+    outputs: model files, ``.json`` (accum.model/1), ``.ply`` (accepted segments; all with
+    ``ply_all``) and/or ``.mcap`` (the model of every frame as a Foxglove SceneUpdate in the object
+    frame, and its counts, ``foxglove_scene``); truth: a truth sidecar path, to score the model frame by frame; history: JSON lines,
     one row per frame; rrd: a Rerun recording; png / panel: pictures of the model and of the last frame.
     All outputs are checked before the work and written together at the end. workers: processes
     extracting the next frames while this one accumulates (``runs.parallel``; the same model bytes
@@ -84,15 +85,18 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
                     continue
                 yield frame
 
-        with rerun_log(files, rrd, "accumulate") as viz:
+        with rerun_log(files, rrd, "accumulate") as viz, scene_log(files, outputs) as scenes:
             for frame, extraction in extracted_frames(frames_with_pose(), params.extract, rec.camera_frame, workers,
                                                       acc.times):
                 step = acc.step(frame, frame.T_camera_object, extraction)
                 row = {"frame_index": frame.index, "timestamp_ns": frame.timestamp_ns, **step.stats.__dict__}
                 if step.tracking is not None:
                     row.update(tracking=step.tracking.status, residual_px=step.tracking.residual_px)
-                if edges is not None or viz:
+                if edges is not None or viz or scenes:
                     model = acc.model()
+                if scenes:
+                    for scene in scenes:
+                        scene.frame(model, frame.timestamp_ns, row)
                 if edges is not None:
                     row.update(score_segments(model.select(model.accepted), edges).as_dict())
                     row.pop("segments")
@@ -108,6 +112,8 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
         if edges is not None:
             result.scores = score_segments(result.model.select(result.model.accepted), edges).as_dict()
         for path in outputs:
+            if str(path).lower().endswith(".mcap"):
+                continue   # written frame by frame above
             if str(path).lower().endswith(".ply"):
                 write_ply(files.open(path), result.model, all_segments=ply_all)
             else:

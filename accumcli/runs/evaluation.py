@@ -17,12 +17,12 @@ TIME_TOLERANCE_NS = 1_000_000
 
 def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: FrameRange = FrameRange(),
                   support_face: int | None = None) -> dict:
-    """Figures of ``path`` against the truth, by the kind of ``path`` (recognised by content):
-    a model (precision, completeness, background of the accepted segments), a frames file
-    (single-frame figures and the funnel, ``accumcli.funnel``) or a poses file (pose errors,
-    tracked fraction). ``frames`` selects lines of a frames or poses file by position. A truth of
-    another object frame, or one with no pose at the file's timestamps, is refused. A truth with
-    ``faces`` also gives a model's precision judged by surface (``accumcli.surface``; ``support_face``: the face it stands on)."""
+    """Figures of ``path`` against the truth, by the kind of ``path`` (recognised by content): a model
+    (precision, completeness, background of the accepted segments), a frames file (single-frame
+    figures and the funnel, ``accumcli.funnel``) or a poses file (pose errors, tracked fraction).
+    ``frames`` selects lines of a frames or poses file by position. A truth of another object frame,
+    or one with no pose at the file's timestamps, is refused. A truth with ``faces`` also gives a
+    model's precision judged by surface (``accumcli.surface``; ``support_face``: the face it stands on)."""
     truth = read_truth(truth_path)
     kind = check_kind(path, "model", "frames", "poses")
     if kind == "model":

@@ -14,7 +14,7 @@ from ..model_io import FramesWriter
 from ..outputs import OutputSet
 from .base import FrameRange, Progress, RecordingOptions, no_progress, nothing_done
 from .parallel import extracted_frames
-from .rerun_sink import rerun_log
+from .frame_logs import rerun_log
 
 
 @dataclass

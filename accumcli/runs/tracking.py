@@ -17,7 +17,7 @@ from ..segments import Segments
 from ..track import PoseTracker, TrackParams
 from ..tum import write_poses_tum
 from .base import FrameRange, Progress, RecordingOptions, no_progress, nothing_done
-from .rerun_sink import rerun_log
+from .frame_logs import rerun_log
 
 
 @dataclass

@@ -2,7 +2,13 @@
 
 from .random_scene import BACKGROUNDS, RANDOM_SHAPES
 from .scene import SHAPES
-from .simulate import SCENES, SimulationOptionError, SimulationOptions, SimulationResult, simulate
+from .simulate import (
+           SCENES,
+           SimulationOptionError,
+           SimulationOptions,
+           SimulationResult,
+           simulate,
+)
 
 __all__ = ["BACKGROUNDS", "RANDOM_SHAPES", "SCENES", "SHAPES", "SimulationOptionError", "SimulationOptions",
            "SimulationResult", "simulate"]

@@ -28,12 +28,31 @@ from ..atomic import atomic_open
 from ..edge_sampling import SAMPLE_SPACING_M, edge_samples, sample_count
 from ..geometry import make_transform, quat_from_transform, transform_points
 from ..recording import RecordingWriter, Topics
-from .random_scene import (BACKGROUNDS, RANDOM_SHAPES, draw_lighting, draw_motion, make_clutter, make_random_background,
-                           make_random_gripper, make_random_object, random_trajectory)
+from .random_scene import (
+    BACKGROUNDS,
+    RANDOM_SHAPES,
+    draw_lighting,
+    draw_motion,
+    make_clutter,
+    make_random_background,
+    make_random_gripper,
+    make_random_object,
+    random_trajectory,
+)
 from .raster import Buffers, Mesh, draw
-from .simulate import (FRAME_PERIOD_NS, RAW_MARGIN_PX, START_NS, SimulationOptionError, SimulationOptions,
-                       SimulationResult, _calibrations, _interpolate_at, _rectified_camera, _write_poses,
-                       project_inside)
+from .simulate import (
+    FRAME_PERIOD_NS,
+    RAW_MARGIN_PX,
+    START_NS,
+    SimulationOptionError,
+    SimulationOptions,
+    SimulationResult,
+    _calibrations,
+    _interpolate_at,
+    _rectified_camera,
+    _write_poses,
+    project_inside,
+)
 
 MIN_STEP_GREY = 6.0
 STEP_OFFSET_PX = 2.0

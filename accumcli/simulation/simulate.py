@@ -26,9 +26,15 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..atomic import atomic_open
-from ..errors import AccumError
 from ..edge_sampling import SAMPLE_SPACING_M, edge_samples, sample_count
-from ..geometry import interpolate, make_transform, quat_from_transform, transform_points, unit
+from ..errors import AccumError
+from ..geometry import (
+    interpolate,
+    make_transform,
+    quat_from_transform,
+    transform_points,
+    unit,
+)
 from ..recording import CameraCalibration, RecordingWriter, Topics
 from .render import PinholeCamera, empty_layer, finish_image, rasterize, reduce
 from .scene import SHAPES, make_background, make_gripper, make_object, trajectory
