@@ -126,7 +126,7 @@ def test_frames_without_pose_are_skipped_with_a_warning(tmp_path):
     (["--detector", "canny"], "'canny' is not one of"),
     (["--depth-range", "2:1"], "expected MIN:MAX"),
     (["-o", "nowhere/m.json"], "the folder nowhere does not exist"),
-    (["-o", "m.txt"], "expected a .json or .ply"),
+    (["-o", "m.txt"], "expected a .json, .ply or .mcap"),
     (["--frames", "10"], "expected START:STOP, found '10' (frame 10 alone is 10:11, the first 10 frames are 0:10)"),
     (["--frames", "5:2"], "expected START < STOP"),
     (["--frames", "50:60"], "frames 50:60 select no frame: the recording has 6 stereo frames (0:6)"),

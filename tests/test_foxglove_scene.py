@@ -33,6 +33,7 @@ def test_model_mcap_holds_the_growing_model_in_the_object_frame(small_recording,
     assert entity.frame_id == "gripper" and entity.frame_locked
     final = read_model(model_json)
     points = np.array([[p.x, p.y, p.z] for p in entity.lines[0].points])
-    np.testing.assert_allclose(points, final.select(final.accepted).endpoints().reshape(-1, 3), atol=1e-6)  # JSON rounding
+    expected = final.select(final.accepted).endpoints().reshape(-1, 3)
+    np.testing.assert_allclose(points, expected, atol=1e-6)   # the JSON rounds
     greens = np.array([c.g for c in entity.lines[0].colors])
     assert len(greens) == len(points) and greens.min() > 0.99   # accepted: yellow (0.5) to green, green full

@@ -15,8 +15,8 @@ from ..pipeline import AccumulateParams, LineAccumulation
 from ..segments import Segments
 from .base import FrameRange, Progress, RecordingOptions, no_progress, nothing_done
 from .checks import check_truth_matches
-from .parallel import extracted_frames
 from .frame_logs import rerun_log, scene_log
+from .parallel import extracted_frames
 
 log = logging.getLogger("accumcli")
 

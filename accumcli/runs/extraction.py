@@ -13,8 +13,8 @@ from ..lines2d import StageTimes
 from ..model_io import FramesWriter
 from ..outputs import OutputSet
 from .base import FrameRange, Progress, RecordingOptions, no_progress, nothing_done
-from .parallel import extracted_frames
 from .frame_logs import rerun_log
+from .parallel import extracted_frames
 
 
 @dataclass
