@@ -272,6 +272,7 @@ def extract(recording, output, rrd, with_2d, frames, extract_params, options):
               help="A truth sidecar: also measure precision, completeness and background frame by frame.")
 @click.option("--history", type=click.Path(dir_okay=False),
               help="Write the per-frame counts (and figures with --truth) as JSON lines.")
+@click.option("--plot", type=click.Path(dir_okay=False), help="Draw the per-frame counts (and figures) as a PNG.")
 @click.option("--png", type=click.Path(dir_okay=False),
               help="Write a picture of the model (confidence as grey level, dark = high).")
 @click.option("--panel", type=click.Path(dir_okay=False),
@@ -286,7 +287,7 @@ def extract(recording, output, rrd, with_2d, frames, extract_params, options):
 @frames_option
 @extraction_options
 @recording_options
-def accumulate(recording, outputs, ply_all, rrd, truth, history, png, panel, motion, position_threshold,
+def accumulate(recording, outputs, ply_all, rrd, truth, history, plot, png, panel, motion, position_threshold,
                angle_threshold, frames, extract_params, options):
     """Accumulate a model of the object over the recording, with the gripper's known motion.
 
@@ -307,7 +308,7 @@ def accumulate(recording, outputs, ply_all, rrd, truth, history, png, panel, mot
     line_model = LineModelParams(thresholds=MetricThresholds(position_threshold / 1000.0, angle_threshold))
     params = AccumulateParams(extract=extract_params, line_model=line_model, motion=motion)
     result = run_with_progress("accumulating", accumulate_recording, recording, outputs, params=params,
-                               options=options, frames=frames, truth=truth, history=history, rrd=rrd, png=png,
+                               options=options, frames=frames, truth=truth, history=history, plot=plot, rrd=rrd, png=png,
                                panel=panel, ply_all=ply_all)
     _report(accumulation_lines(result, motion))
     _wrote(result.outputs)
@@ -441,11 +442,12 @@ def batch(recordings, outdir, track, truth_from_sidecar, workers, ray_address, f
               help="Segments farther than this from every truth edge are background, millimetres.")
 @click.option("--min-seen", type=click.IntRange(1, 1000), default=3, show_default=True,
               help="Completeness counts edge samples seen in at least this many frames.")
+@click.option("--plot", type=click.Path(dir_okay=False), help="With a frames file: its figures frame by frame as a PNG.")
 @click.option("--support-face", type=click.IntRange(min=0), metavar="N",
               help="With a truth that has faces: segments on face N's plane near the object (the board it stands "
                    "on) count as on the body.")
 @frames_option
-def eval_(inputs, poses, as_json, position_tol, angle_tol, background_dist, min_seen, support_face, frames):
+def eval_(inputs, poses, as_json, position_tol, angle_tol, background_dist, min_seen, plot, support_face, frames):
     """Measure a model, frames file or poses file against a truth sidecar.
 
     The kind of INPUT is recognised by its content.
@@ -468,7 +470,7 @@ def eval_(inputs, poses, as_json, position_tol, angle_tol, background_dist, min_
     if len(inputs) != 2:
         raise click.UsageError("expected INPUT TRUTH.json (INPUT: a model, frames or poses file)")
     tol = Tolerances(position_tol / 1000.0, angle_tol, background_dist / 1000.0, min_seen)
-    figures = evaluate_file(inputs[0], inputs[1], tol, frames, support_face)
+    figures = evaluate_file(inputs[0], inputs[1], tol, frames, support_face, plot)
     click.echo(dumps(figures, indent=1) if as_json else "\n".join(figures_lines(figures)))
 
 

@@ -165,10 +165,11 @@ def pose_errors(times_ns: np.ndarray, poses: np.ndarray, status: list, truth: Tr
     return stats
 
 
-def evaluate_frames(frames, truth: Truth, tol: Tolerances = Tolerances()) -> dict:
+def evaluate_frames(frames, truth: Truth, tol: Tolerances = Tolerances(), rows: list | None = None) -> dict:
     """Single-frame figures over ``frames`` (iterable of (timestamp_ns, Segments in the camera frame)),
     placed with the truth's poses: the fraction of segments within the background distance of the
-    object that are correct, the mean single-frame completeness, and the background fraction."""
+    object that are correct, the mean single-frame completeness, and the background fraction.
+    ``rows``: if a list, each frame's own figures are appended to it (for a plot over frames)."""
     edges = EdgeSamples.of(truth, tol)
     per_frame, near, correct, background, total = [], 0, 0, 0, 0
     for t_ns, segments in frames:
@@ -177,6 +178,11 @@ def evaluate_frames(frames, truth: Truth, tol: Tolerances = Tolerances()) -> dic
             continue
         r = frame_accuracy(segments, T, edges, tol)
         per_frame.append(r["completeness"])
+        if rows is not None:
+            rows.append({"frame_index": len(rows), "timestamp_ns": int(t_ns), "segments": r["segments"],
+                         "accuracy_near_object": r["correct_near"] / r["near_object"] if r["near_object"]
+                         else float("nan"), "completeness": r["completeness"],
+                         "background": r["background"] / r["segments"] if r["segments"] else float("nan")})
         near += r["near_object"]
         correct += r["correct_near"]
         background += r["background"]

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 import time
+from pathlib import Path
 from dataclasses import dataclass, field
 
 from ..evaluate import EdgeSamples, score_segments
@@ -49,19 +50,20 @@ class AccumulationResult:
 
 def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = AccumulateParams(),
                          options: RecordingOptions = RecordingOptions(), frames: FrameRange = FrameRange(),
-                         truth=None, history=None, rrd=None, png=None, panel=None, ply_all: bool = False,
+                         truth=None, history=None, plot=None, rrd=None, png=None, panel=None,
+                         ply_all: bool = False,
                          workers: int = 1, progress: Progress = no_progress) -> AccumulationResult:
     """Accumulate the frames in ``frames`` of ``recording`` into one model.
 
     outputs: model files, ``.json`` (accum.model/1), ``.ply`` (accepted segments; all with
     ``ply_all``) and/or ``.mcap`` (the model of every frame as a Foxglove SceneUpdate in the object
     frame, and its counts, ``foxglove_scene``); truth: a truth sidecar path, to score the model frame by frame; history: JSON lines,
-    one row per frame; rrd: a Rerun recording; png / panel: pictures of the model and of the last frame.
+    one row per frame; plot: a PNG of those rows over the frames (``plots``); rrd: a Rerun recording; png / panel: pictures of the model and of the last frame.
     All outputs are checked before the work and written together at the end. workers: processes
     extracting the next frames while this one accumulates (``runs.parallel``; the same model bytes
     whatever the number).
     """
-    files = OutputSet([*outputs, history, rrd, png, panel])
+    files = OutputSet([*outputs, history, plot, rrd, png, panel])
     edges = None
     if truth is not None:
         truth_doc = read_truth(truth)
@@ -120,6 +122,10 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
                 write_model(files.open(path), result.model)
         if history:
             write_json_lines(files.open(history), result.rows)
+        if plot:
+            from ..plots import plot_frames
+
+            plot_frames(files.open(plot, "wb"), result.rows, f"accum accumulate {Path(recording).name}")
         if png or panel:
             from ..render import render_frame_panel, render_model, write_png
 
@@ -129,5 +135,5 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
                 write_png(files.open(panel, "wb"), render_frame_panel(step.frame, step.extraction, result.model,
                                                                 step.T_camera_object))
     result.seconds = time.perf_counter() - t0
-    result.outputs = [str(p) for p in (*outputs, history, rrd, png, panel) if p]
+    result.outputs = [str(p) for p in (*outputs, history, plot, rrd, png, panel) if p]
     return result

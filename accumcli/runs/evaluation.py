@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from ..errors import InputError
 from ..evaluate import Tolerances, evaluate_frames, evaluate_model, pose_errors
 from ..funnel import funnel
+from ..outputs import OutputSet
 from ..model_io import check_kind, read_frames, read_model, read_poses, read_truth
 from ..surface import faces_of, surface_scores
 from .base import FrameRange
@@ -16,13 +19,14 @@ TIME_TOLERANCE_NS = 1_000_000
 
 
 def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: FrameRange = FrameRange(),
-                  support_face: int | None = None) -> dict:
+                  support_face: int | None = None, plot=None) -> dict:
     """Figures of ``path`` against the truth, by the kind of ``path`` (recognised by content): a model
     (precision, completeness, background of the accepted segments), a frames file (single-frame
     figures and the funnel, ``accumcli.funnel``) or a poses file (pose errors, tracked fraction).
     ``frames`` selects lines of a frames or poses file by position. A truth of another object frame,
     or one with no pose at the file's timestamps, is refused. A truth with ``faces`` also gives a
-    model's precision judged by surface (``accumcli.surface``; ``support_face``: the face it stands on)."""
+    model's precision judged by surface (``accumcli.surface``; ``support_face``: the face it stands on).
+    ``plot``: a PNG of a frames file's figures frame by frame (``plots``)."""
     truth = read_truth(truth_path)
     kind = check_kind(path, "model", "frames", "poses")
     if kind == "model":
@@ -49,5 +53,13 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
                 if i >= frames.start and (frames.stop is None or i < frames.stop)]
         times = np.array([t for t, _, _ in rows], np.int64)
         check_truth_times(truth, times, TIME_TOLERANCE_NS, path, truth_path)
-        return {**evaluate_frames([(t, s) for t, s, _ in rows], truth, tol), **funnel(rows, truth, truth_path, tol)}
+        per_frame = []
+        figures = {**evaluate_frames([(t, s) for t, s, _ in rows], truth, tol, per_frame),
+                   **funnel(rows, truth, truth_path, tol)}
+        if plot:
+            from ..plots import plot_frames
+
+            with OutputSet([plot]) as files:
+                plot_frames(files.open(plot, "wb"), per_frame, f"accum eval {Path(path).name}: single frames")
+        return figures
     raise InputError(f"{path}: expected a model, frames or poses file of accum to evaluate, got a {kind} file")
