@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import functools
 import logging
-import os
 import sys
 
 import click
@@ -23,6 +22,7 @@ from .cli_options import (
     number_pair,
     parse_pose,
     recording_options,
+    workers_option,
 )
 from .errors import AccumError
 
@@ -236,10 +236,11 @@ def simulate(output, count, size, scene, shape, seed, size_mm, distance, contras
 @click.option("--rrd", type=click.Path(dir_okay=False),
               help="Also save a Rerun recording of each frame's images, 2D and 3D segments.")
 @click.option("--with-2d", is_flag=True, help="Also write each frame's left 2D segments (for the funnel of eval).")
+@workers_option
 @frames_option
 @extraction_options
 @recording_options
-def extract(recording, output, rrd, with_2d, frames, extract_params, options):
+def extract(recording, output, rrd, with_2d, workers, frames, extract_params, options):
     """Extract local 3D line segments from every stereo pair.
 
     Each line of the output is a model-format object in the left camera frame
@@ -254,7 +255,8 @@ def extract(recording, output, rrd, with_2d, frames, extract_params, options):
     from .runs import extract_recording
 
     result = run_with_progress("extracting", extract_recording, recording, output, params=extract_params,
-                               options=options, frames=frames, rrd=rrd, with_2d=with_2d)
+                               options=options, frames=frames, rrd=rrd, with_2d=with_2d,
+                               workers=workers)
     _report(extraction_lines(result))
     _wrote(result.outputs)
 
@@ -284,11 +286,12 @@ def extract(recording, output, rrd, with_2d, frames, extract_params, options):
               help="s_p of the paper's metric (association and merging), millimetres.")
 @click.option("--angle-threshold", type=click.FloatRange(0.5, 45.0), default=7.0, show_default=True,
               help="s_o of the paper's metric, degrees.")
+@workers_option
 @frames_option
 @extraction_options
 @recording_options
 def accumulate(recording, outputs, ply_all, rrd, truth, history, plot, png, panel, motion, position_threshold,
-               angle_threshold, frames, extract_params, options):
+               angle_threshold, workers, frames, extract_params, options):
     """Accumulate a model of the object over the recording, with the gripper's known motion.
 
     \b
@@ -308,8 +311,8 @@ def accumulate(recording, outputs, ply_all, rrd, truth, history, plot, png, pane
     line_model = LineModelParams(thresholds=MetricThresholds(position_threshold / 1000.0, angle_threshold))
     params = AccumulateParams(extract=extract_params, line_model=line_model, motion=motion)
     result = run_with_progress("accumulating", accumulate_recording, recording, outputs, params=params,
-                               options=options, frames=frames, truth=truth, history=history, plot=plot, rrd=rrd, png=png,
-                               panel=panel, ply_all=ply_all)
+                               options=options, frames=frames, truth=truth, history=history, plot=plot, rrd=rrd,
+                               png=png, panel=panel, ply_all=ply_all, workers=workers)
     _report(accumulation_lines(result, motion))
     _wrote(result.outputs)
 
@@ -398,8 +401,7 @@ def view(inputs, rrd, spawn, connect, png, png_frame, frames, options):
 @output_option("outdir", required=True, type=click.Path(file_okay=False), help="Folder of the results.")
 @click.option("--track", is_flag=True, help="Also track each model through its recording (poses.json).")
 @click.option("--truth-from-sidecar", is_flag=True, help="Evaluate each model against NAME.truth.json beside it.")
-@click.option("--workers", type=click.IntRange(min=1), default=min(2, os.cpu_count() or 1), show_default=True,
-              help="Recordings processed at once on this machine.")
+@workers_option
 @click.option("--ray", "ray_address", metavar="ADDRESS", help="Run the tasks on a Ray cluster (ray.init(address)); "
               "'local' starts Ray's local cluster. Needs pip install 'accumcli[ray]'.")
 @frames_option
@@ -442,7 +444,8 @@ def batch(recordings, outdir, track, truth_from_sidecar, workers, ray_address, f
               help="Segments farther than this from every truth edge are background, millimetres.")
 @click.option("--min-seen", type=click.IntRange(1, 1000), default=3, show_default=True,
               help="Completeness counts edge samples seen in at least this many frames.")
-@click.option("--plot", type=click.Path(dir_okay=False), help="With a frames file: its figures frame by frame as a PNG.")
+@click.option("--plot", type=click.Path(dir_okay=False),
+              help="With a frames file: its figures frame by frame as a PNG.")
 @click.option("--support-face", type=click.IntRange(min=0), metavar="N",
               help="With a truth that has faces: segments on face N's plane near the object (the board it stands "
                    "on) count as on the body.")

@@ -6,6 +6,7 @@ and how to extract (``extract_params``: an ``ExtractParams``). Values are parsed
 from __future__ import annotations
 
 import functools
+import os
 
 import click
 
@@ -27,6 +28,11 @@ def _parse_frames(text):
 
     return FrameRange.parse(text)
 
+
+workers_option = click.option(
+    "--workers", type=click.IntRange(min=1), default=min(2, os.cpu_count() or 1), show_default=True,
+    help="Worker processes (extract, accumulate: frames extracted ahead; batch: recordings at once). The "
+         "output is the same whatever the number.")
 
 frames_option = click.option("--frames", "frames", default="0:", callback=library_value(_parse_frames),
                              metavar="START:STOP", help="Stereo frames to use (0-based, STOP excluded; "

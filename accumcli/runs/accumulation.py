@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import logging
 import time
-from pathlib import Path
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from ..evaluate import EdgeSamples, score_segments
 from ..lines2d import StageTimes
@@ -57,9 +57,10 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
 
     outputs: model files, ``.json`` (accum.model/1), ``.ply`` (accepted segments; all with
     ``ply_all``) and/or ``.mcap`` (the model of every frame as a Foxglove SceneUpdate in the object
-    frame, and its counts, ``foxglove_scene``); truth: a truth sidecar path, to score the model frame by frame; history: JSON lines,
-    one row per frame; plot: a PNG of those rows over the frames (``plots``); rrd: a Rerun recording; png / panel: pictures of the model and of the last frame.
-    All outputs are checked before the work and written together at the end. workers: processes
+    frame, and its counts, ``foxglove_scene``); truth: a truth sidecar path, to score the model
+    frame by frame; history: JSON lines, one row per frame; plot: a PNG of those rows over the
+    frames (``plots``); rrd: a Rerun recording; png / panel: pictures of the model and of the last
+    frame. All outputs are checked before the work and written together at the end. workers: processes
     extracting the next frames while this one accumulates (``runs.parallel``; the same model bytes
     whatever the number).
     """

@@ -9,8 +9,8 @@ import numpy as np
 from ..errors import InputError
 from ..evaluate import Tolerances, evaluate_frames, evaluate_model, pose_errors
 from ..funnel import funnel
-from ..outputs import OutputSet
 from ..model_io import check_kind, read_frames, read_model, read_poses, read_truth
+from ..outputs import OutputSet
 from ..surface import faces_of, surface_scores
 from .base import FrameRange
 from .checks import check_truth_matches, check_truth_times
