@@ -1,0 +1,559 @@
+"""`make fuzz`: mutated recordings through info, extraction and a short accumulation.
+
+Tiny good recordings (160x120, 3 stereo frames; PNG, JPEG, mono8, distorted,
+a tf tree, lz4, unchunked, without CRCs) are mutated at the byte level (bit
+flips, overwrites, inserts, deletions, truncations, huge record lengths) and
+rebuilt structure-aware (lying image sizes, PNG bombs, NaN/inf/zero in
+calibration and poses, zero/negative baseline, odd timestamps, tf cycles,
+wrong schemas, unpaired cameras). Each input runs ``exercise(path)`` in a forked
+worker (2 at a time, 60 s timeout, RLIMIT_AS 2 GiB). A run passes when it ends
+normally or with an ``AccumError``; a traceback, a hang, a memory-limit hit or
+output that is not accum's is a failure and the input is saved to the crash
+folder. Prints the counts by class.
+
+    python benchmarks/fuzz.py [--count N] [--seconds S] [--seed K] [--crashes DIR]
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import logging  # noqa: E402
+import resource  # noqa: E402
+import select  # noqa: E402
+import signal  # noqa: E402
+import struct  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+import traceback  # noqa: E402
+import zlib  # noqa: E402
+from collections import Counter  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration as CalibrationMsg  # noqa: E402
+from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform  # noqa: E402
+from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms  # noqa: E402
+from foxglove_schemas_protobuf.RawImage_pb2 import RawImage  # noqa: E402
+from mcap.writer import CompressionType, Writer  # noqa: E402
+from mcap_protobuf.schema import build_file_descriptor_set  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from accumcli.errors import AccumError  # noqa: E402
+from accumcli.extract import extract_frame  # noqa: E402
+from accumcli.geometry import make_transform, quat_from_transform  # noqa: E402
+from accumcli.pipeline import AccumulateParams, LineAccumulation  # noqa: E402
+from accumcli.recording import CameraCalibration, Recording  # noqa: E402
+from accumcli.recording.messages import calibration_to_msg, image_to_msg, to_stamp, transform_to_msg  # noqa: E402
+
+T0 = 1_750_000_000 * 1_000_000_000
+PERIOD = 100_000_000
+TIMEOUT_S = 60
+MEMORY_LIMIT = 2 << 30
+LEFT, RIGHT = "/stereo/left/image", "/stereo/right/image"
+
+
+def pick(rng: np.random.Generator, options):
+    """One element of the sequence ``options``, as it is (no conversion to a numpy type)."""
+    options = list(options)
+    return options[int(rng.integers(len(options)))]
+
+
+# -- building recordings ------------------------------------------------------------------------
+def scene(i: int, side: str, width: int = 160, height: int = 120) -> np.ndarray:
+    """(H, W) uint8: a bright box on a grey ramp, shifted by frame and by 8 px disparity on the right."""
+    image = np.tile(np.linspace(60, 110, width, dtype=np.uint8), (height, 1))
+    x = width // 3 + 3 * i - (8 if side == "right" else 0)
+    image[height // 4: 3 * height // 4, x: x + width // 4] = 210
+    image[height // 3: height // 2, x + 6: x + 14] = 30
+    return image
+
+
+def calibration(side: str, width: int = 160, height: int = 120, fx: float = 150.0, baseline: float = 0.08,
+                raw: bool = False) -> CameraCalibration:
+    P = np.array([[fx, 0, width / 2, 0], [0, fx, height / 2, 0], [0, 0, 1, 0]], float)
+    if side == "right":
+        P[0, 3] = -fx * baseline
+    K, D = P[:, :3].copy(), np.zeros(5)
+    if raw:
+        K[0, 0] *= 1.02
+        D = np.array([-0.1, 0.02, 0.0, 0.0, 0.0])
+    return CameraCalibration(width, height, K, D, np.eye(3), P, "plumb_bob", f"camera_{side}")
+
+
+class Builder:
+    """Writes an MCAP with protobuf Foxglove messages, any schema on any topic, raw bytes allowed."""
+
+    def __init__(self, path, chunk_size=4096, compression=CompressionType.ZSTD, chunked=True, crcs=True):
+        self.file = open(path, "wb")
+        self.w = Writer(self.file, chunk_size=chunk_size, compression=compression, use_chunking=chunked,
+                        enable_crcs=crcs)
+        self.w.start(profile="", library="accum-fuzz")
+        self.channels: dict = {}
+
+    def message(self, topic: str, msg, t_ns: int, schema_name: str | None = None, schema_data: bytes | None = None,
+                encoding: str = "protobuf") -> None:
+        key = (topic, schema_name or msg.DESCRIPTOR.full_name, schema_data, encoding)
+        if key not in self.channels:
+            data = schema_data if schema_data is not None else \
+                build_file_descriptor_set(type(msg)).SerializeToString()
+            schema = self.w.register_schema(name=key[1], encoding="protobuf", data=data)
+            self.channels[key] = self.w.register_channel(topic=topic, message_encoding=encoding, schema_id=schema)
+        payload = msg if isinstance(msg, bytes) else msg.SerializeToString()
+        log_time = min(max(int(t_ns), 0), (1 << 64) - 1)
+        self.w.add_message(self.channels[key], log_time=log_time, data=payload, publish_time=log_time)
+
+    def close(self) -> None:
+        self.w.finish()
+        self.file.close()
+
+
+def build(path, *, n=3, width=160, height=120, encoding="png", raw=False, tf_tree=False, compression="zstd",
+          chunked=True, crcs=True, chunk_size=4096, left_cal=None, right_cal=None, cal_edit=None, image_edit=None,
+          left_times=None, right_times=None, tf=None, tf_edit=None, extra=()) -> str:
+    """A small good recording; the keyword arguments change it (the fuzzer's structure-aware mutations).
+
+    cal_edit(side, msg), image_edit(side, i, msg) -> msg | bytes, tf_edit(msg) edit messages in place or
+    return replacements; tf: list of (parent, child, t_ns, translation, quat) replacing the default
+    camera_left -> gripper poses; extra: (topic, message, t_ns, schema_name, schema_data, encoding) tuples.
+    """
+    comp = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}[compression]
+    b = Builder(path, chunk_size, comp, chunked, crcs)
+    for side in ("left", "right"):
+        cal = (left_cal if side == "left" else right_cal) or calibration(side, width, height, raw=raw)
+        msg = calibration_to_msg(cal, T0)
+        if cal_edit:
+            msg = cal_edit(side, msg) or msg
+        b.message(f"/stereo/{side}/calibration", msg, T0)
+    if tf is None:
+        tf = []
+        for i in range(n):
+            T = make_transform(np.eye(3), [0.01 * i, 0.0, 0.5])
+            if tf_tree:
+                tf.append(("world", "gripper", T0 + i * PERIOD, T[:3, 3], quat_from_transform(T)[1]))
+            else:
+                tf.append(("camera_left", "gripper", T0 + i * PERIOD, T[:3, 3], quat_from_transform(T)[1]))
+        if tf_tree:
+            b.message("/tf_static", transform_to_msg("world", "camera_left", T0, (0, 0, 0), (0, 0, 0, 1)), T0)
+    for parent, child, t_ns, translation, quat in tf:
+        msg = FrameTransform(parent_frame_id=parent, child_frame_id=child)
+        if 0 <= t_ns < 1 << 63:
+            msg.timestamp.CopyFrom(to_stamp(t_ns))
+        else:
+            msg.timestamp.seconds, msg.timestamp.nanos = int(t_ns // 1_000_000_000), int(t_ns % 1_000_000_000)
+        msg.translation.x, msg.translation.y, msg.translation.z = map(float, translation)
+        msg.rotation.x, msg.rotation.y, msg.rotation.z, msg.rotation.w = map(float, quat)
+        if tf_edit:
+            msg = tf_edit(msg) or msg
+        b.message("/tf", msg, min(max(t_ns, 0), 1 << 62))
+    for i in range(n):
+        for side, topic, times in (("left", LEFT, left_times), ("right", RIGHT, right_times)):
+            t = times[i] if times is not None else T0 + i * PERIOD
+            msg = image_to_msg(scene(i, side, width, height), 0, f"camera_{side}", encoding)
+            if 0 <= t < 1 << 63:
+                msg.timestamp.CopyFrom(to_stamp(t))
+            else:
+                msg.timestamp.seconds, msg.timestamp.nanos = int(t // 1_000_000_000), int(t % 1_000_000_000)
+            if image_edit:
+                msg = image_edit(side, i, msg) or msg
+            b.message(topic, msg, min(max(t, 0), 1 << 62))
+    for topic, msg, t_ns, schema_name, schema_data, enc in extra:
+        b.message(topic, msg, t_ns, schema_name, schema_data, enc)
+    b.close()
+    return str(path)
+
+
+SEEDS = {
+    "png": {}, "jpeg": {"encoding": "jpeg"}, "mono8": {"encoding": "mono8"}, "raw": {"raw": True},
+    "tftree": {"tf_tree": True}, "lz4": {"compression": "lz4"}, "unchunked": {"chunked": False},
+    "nocrc": {"crcs": False}, "nocompression": {"compression": "none", "crcs": False},
+}
+
+
+# -- structure-aware mutations ------------------------------------------------------------------
+def png_with_size(msg, width: int, height: int):
+    """The PNG ``msg`` with its IHDR claiming width x height (CRC fixed, so only the size lies)."""
+    data = bytearray(msg.data)
+    data[16:24] = struct.pack(">II", width, height)
+    data[29:33] = struct.pack(">I", zlib.crc32(bytes(data[12:29])))
+    msg.data = bytes(data)
+    return msg
+
+
+def png_bomb(width: int, height: int) -> bytes:
+    """A valid grey PNG of width x height zeros (highly compressible: a decompression bomb when large)."""
+    row = b"\x00" * (width + 1)
+    z = zlib.compressobj(9)
+    idat = b"".join(z.compress(row) for _ in range(height)) + z.flush()
+
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)) + \
+        chunk(b"IDAT", idat) + chunk(b"IEND", b"")
+
+
+BAD_FLOATS = [float("nan"), float("inf"), -float("inf"), 0.0, -1.0, 1e200, -1e300, 1e-320, 1e20]
+
+
+def structure_mutation(rng: np.random.Generator, path: str) -> str:
+    """Builds a recording with one to three random defects; returns their names."""
+    kw: dict = dict(SEEDS[pick(rng, list(SEEDS))])
+    names = []
+    for _ in range(int(rng.integers(1, 4))):
+        name = str(pick(rng, list(STRUCTURE)))
+        names.append(name)
+        STRUCTURE[name](rng, kw)
+    if kw.get("encoding") == "mono8" and "lying_png" in names + ["png_bomb"] * ("png_bomb" in names):
+        kw["encoding"] = "png"
+    build(path, **kw)
+    return "+".join(names)
+
+
+def _chain(kw, key, fn):
+    previous = kw.get(key)
+
+    def both(*args):
+        msg = previous(*args) if previous else None
+        return fn(*args[:-1], msg if msg is not None else args[-1])
+    kw[key] = both
+
+
+def m_lying_png(rng, kw):
+    kw["encoding"] = "png"
+    w, h = (int(pick(rng, [0, 1, 161, 100000, 65536, 1 << 31, (1 << 32) - 1])) for _ in range(2))
+    _chain(kw, "image_edit", lambda side, i, msg: png_with_size(msg, w, h)
+           if rng.random() < 0.7 and getattr(msg, "format", "") == "png" else msg)
+
+
+def m_png_bomb(rng, kw):
+    size = [(20000, 20000), (16384, 1024), (4000, 4000), (160, 120)][int(rng.integers(4))]
+    data = png_bomb(*size)
+    kw["encoding"] = "png"
+    if rng.random() < 0.3 and size[0] * size[1] <= 1 << 24:
+        kw["width"], kw["height"] = size  # the calibration agrees: a large but legal image
+    _chain(kw, "image_edit", lambda side, i, msg: (setattr(msg, "data", data), msg)[1]
+           if hasattr(msg, "format") else msg)
+
+
+def m_lying_raw(rng, kw):
+    kw["encoding"] = "mono8"
+
+    def edit(side, i, msg):
+        if hasattr(msg, "format"):
+            return msg
+        field = ["width", "height", "step"][int(rng.integers(3))]
+        setattr(msg, field, int(pick(rng, [0, 1, 159, 100000, (1 << 32) - 1])))
+        if rng.random() < 0.3:
+            msg.encoding = str(pick(rng, ["rgb8", "mono16", "yuv422", ""]))
+        return msg
+    _chain(kw, "image_edit", edit)
+
+
+def m_garbage_image(rng, kw):
+    def edit(side, i, msg):
+        data = bytearray(getattr(msg, "data"))
+        for _ in range(int(rng.integers(1, 20))):
+            if data:
+                data[int(rng.integers(len(data)))] = int(rng.integers(256))
+        msg.data = bytes(data[: int(rng.integers(len(data) + 1))] if rng.random() < 0.3 else data)
+        return msg
+    _chain(kw, "image_edit", edit)
+
+
+def m_calibration_values(rng, kw):
+    def edit(side, msg):
+        field = str(pick(rng, ["K", "P", "D", "R"]))
+        values = list(getattr(msg, field))
+        if values:
+            values[int(rng.integers(len(values)))] = float(pick(rng, BAD_FLOATS))
+        del getattr(msg, field)[:]
+        getattr(msg, field).extend(values)
+        return msg
+    _chain(kw, "cal_edit", edit)
+
+
+def m_calibration_shape(rng, kw):
+    def edit(side, msg):
+        choice = int(rng.integers(4))
+        if choice == 0:
+            del msg.D[:]
+            msg.D.extend([0.01] * int(pick(rng, [1, 3, 6, 11, 15, 40])))
+        elif choice == 1:
+            msg.width = int(pick(rng, [0, 65536, 20000, (1 << 31), 16384]))
+        elif choice == 2:
+            msg.height = int(pick(rng, [0, 65536, 20000, (1 << 31) - 1]))
+        else:
+            msg.distortion_model = str(pick(rng, ["equidistant", "fisheye", ""]))
+        return msg
+    _chain(kw, "cal_edit", edit)
+
+
+def m_baseline(rng, kw):
+    b = float(pick(rng, [0.0, -0.08, float("nan"), float("inf"), 1e-300, 1e300]))
+    kw["right_cal"] = calibration("right", kw.get("width", 160), kw.get("height", 120), baseline=b,
+                                  raw=kw.get("raw", False))
+
+
+def m_pose_values(rng, kw):
+    def edit(msg):
+        if rng.random() < 0.5:
+            setattr(msg.rotation, str(pick(rng, list("xyzw"))), float(pick(rng, BAD_FLOATS)))
+        else:
+            setattr(msg.translation, str(pick(rng, list("xyz"))), float(pick(rng, BAD_FLOATS)))
+        return msg
+    kw["tf_edit"] = edit
+
+
+def m_timestamps(rng, kw):
+    n = kw.get("n", 3)
+    base = [T0 + i * PERIOD for i in range(n)]
+    kind = int(rng.integers(5))
+    if kind == 0:
+        times = [-t for t in base]
+    elif kind == 1:
+        times = [base[0]] * n
+    elif kind == 2:
+        times = base[::-1]
+    elif kind == 3:
+        times = [(1 << 63) - 1 - i for i in range(n)]
+    else:
+        times = [int(x) for x in rng.integers(-(1 << 62), 1 << 62, n)]
+    key = str(pick(rng, ["left_times", "right_times", "both", "tf"]))
+    if key == "both":
+        kw["left_times"] = kw["right_times"] = times
+    elif key == "tf":
+        kw["tf"] = [("camera_left", "gripper", t, (0.01 * i, 0, 0.5), (0, 0, 0, 1)) for i, t in enumerate(times)]
+    else:
+        kw[key] = times
+
+
+def m_offset(rng, kw):
+    offset = int(pick(rng, [2_000_000, 5_000_000, 50_000_000, 999_999]))
+    kw["right_times"] = [T0 + i * PERIOD + offset for i in range(kw.get("n", 3))]
+
+
+def m_tf_cycle(rng, kw):
+    q = (0, 0, 0, 1)
+    kw["tf"] = [("camera_left", "gripper", T0, (0, 0, 0.5), q), ("gripper", "camera_left", T0, (0, 0, -0.4), q),
+                ("gripper", "gripper", T0, (0, 0, 0), q), ("a", "b", T0, (0, 0, 0), q),
+                ("b", "a", T0 + 1, (1, 0, 0), q), ("world", "gripper", T0, (0, 0, 0), q)]
+    if rng.random() < 0.5:
+        kw["tf"] = kw["tf"][1:]
+
+
+def m_wrong_schema(rng, kw):
+    topic = str(pick(rng, [LEFT, RIGHT, "/stereo/left/calibration", "/tf"]))
+    kind = int(rng.integers(4))
+    msg = [CalibrationMsg(width=160, height=120), FrameTransform(), RawImage(width=3, height=2, encoding="mono8"),
+           FrameTransforms()][kind]
+    schema_name = str(pick(rng, ["", "foxglove.CameraCalibration", "foxglove.CompressedImage", "x.Y"]))
+    schema_data = bytes(rng.integers(0, 256, int(rng.integers(0, 40)), dtype=np.uint8)) if rng.random() < 0.5 \
+        else None
+    encoding = "protobuf" if rng.random() < 0.8 else "json"
+    extra = list(kw.get("extra", ()))
+    extra.append((topic, msg, T0, schema_name or None, schema_data, encoding))
+    kw["extra"] = extra
+
+
+def m_missing(rng, kw):
+    kw["n"] = int(pick(rng, [0, 1]))
+
+
+STRUCTURE = {f.__name__[2:]: f for f in (m_lying_png, m_png_bomb, m_lying_raw, m_garbage_image, m_calibration_values,
+                                          m_calibration_shape, m_baseline, m_pose_values, m_timestamps, m_offset,
+                                          m_tf_cycle, m_wrong_schema, m_missing)}
+
+
+# -- byte-level mutations -------------------------------------------------------------------------
+def record_offsets(data: bytes) -> list[int]:
+    """Byte offsets of the top-level MCAP records of a good file."""
+    pos, out = 8, []
+    while pos + 9 <= len(data) - 8:
+        out.append(pos)
+        pos += 9 + struct.unpack_from("<Q", data, pos + 1)[0]
+    return out
+
+
+def byte_mutation(rng: np.random.Generator, data: bytes) -> tuple[str, bytes]:
+    data = bytearray(data)
+    kind = str(pick(rng, ["flip", "overwrite", "insert", "delete", "truncate", "length", "duplicate"]))
+    n = len(data)
+    if kind == "flip":
+        for _ in range(int(rng.integers(1, 5))):
+            i = int(rng.integers(n))
+            data[i] ^= 1 << int(rng.integers(8))
+    elif kind == "overwrite":
+        i = int(rng.integers(n))
+        data[i:i + 8] = bytes(rng.integers(0, 256, 8, dtype=np.uint8))
+    elif kind == "insert":
+        i = int(rng.integers(n))
+        data[i:i] = bytes(rng.integers(0, 256, int(rng.integers(1, 64)), dtype=np.uint8))
+    elif kind == "delete":
+        i = int(rng.integers(n))
+        del data[i:i + int(rng.integers(1, 256))]
+    elif kind == "truncate":
+        del data[int(rng.integers(n)):]
+    elif kind == "duplicate":
+        i = int(rng.integers(n))
+        data[i:i] = data[i:i + int(rng.integers(1, 512))]
+    else:  # a record's length (or a length inside it) made huge or small
+        offsets = record_offsets(bytes(data))
+        pos = int(pick(rng, offsets)) if offsets else 8
+        field_at = pos + 1 + (0 if rng.random() < 0.5 else 9 + 8 * int(rng.integers(0, 4)))
+        value = [0, 1, 1 << 31, (1 << 63) - 1, (1 << 64) - 1, n][int(rng.integers(6))]
+        data[field_at:field_at + 8] = struct.pack("<Q", value)[: max(0, min(8, len(data) - field_at))]
+    return kind, bytes(data)
+
+
+# -- running ------------------------------------------------------------------------------------
+def exercise(path: str) -> None:
+    """info, then extraction and accumulation of the first frames; only AccumError may escape."""
+    with Recording(path, require_pose=False) as rec:
+        rec.info()
+        accumulation = LineAccumulation(AccumulateParams())
+        for frame in rec.frames(0, 3):
+            extraction = extract_frame(frame)
+            if frame.T_camera_object is not None:
+                accumulation.step(frame, frame.T_camera_object, extraction)
+        accumulation.model()
+
+
+def _child(path: str, out_fd: int) -> None:
+    resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT, MEMORY_LIMIT))
+    sink = os.open(path + ".out", os.O_WRONLY | os.O_CREAT | os.O_TRUNC)
+    os.dup2(sink, 1)
+    os.dup2(sink, 2)
+    logger = logging.getLogger("accumcli")
+    logger.handlers[:] = [logging.NullHandler()]
+    logger.propagate = False
+    try:
+        exercise(path)
+        result = "ok"
+    except AccumError:
+        result = "accum error"
+    except MemoryError:
+        result = "memory limit\n" + traceback.format_exc()
+    except BaseException as e:  # noqa: BLE001 - classifying every escape is the point
+        result = f"traceback {type(e).__name__}\n" + traceback.format_exc()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os.write(out_fd, result.encode()[:60000])
+    os._exit(0)
+
+
+class Run:
+    """One forked run of ``exercise(path)`` under the limits."""
+
+    def __init__(self, path: str, kind: str):
+        self.path, self.kind, self.data = path, kind, Path(path).read_bytes()
+        self.fd, write_fd = os.pipe()
+        self.pid = os.fork()
+        if self.pid == 0:
+            os.close(self.fd)
+            _child(path, write_fd)
+        os.close(write_fd)
+        self.deadline = time.monotonic() + TIMEOUT_S
+        self.chunks: list[bytes] = []
+
+    def read(self) -> bool:
+        """Read what the child sent; True when it has finished."""
+        data = os.read(self.fd, 65536)
+        self.chunks.append(data)
+        return not data
+
+    def result(self, hung: bool = False) -> tuple[str, str]:
+        if hung:
+            os.kill(self.pid, signal.SIGKILL)
+        os.close(self.fd)
+        _, status = os.waitpid(self.pid, 0)
+        if hung:
+            return "hang", f"no result within {TIMEOUT_S} s"
+        text = b"".join(self.chunks).decode("utf-8", "replace")
+        if not text:
+            return "signal", f"child ended with status {status}"
+        cls, _, detail = text.partition("\n")
+        output = Path(self.path + ".out").read_text(errors="replace").strip()
+        if cls in ("ok", "accum error") and output:
+            return "foreign output", output[:2000]
+        return cls, detail
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--count", type=int, default=10000)
+    ap.add_argument("--seconds", type=float, default=None)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--crashes", default=str(ROOT / "out" / "fuzz_crashes"))
+    args = ap.parse_args(argv)
+    rng = np.random.default_rng(args.seed)
+    work = Path(tempfile.mkdtemp(prefix="accum-fuzz-"))
+    crashes = Path(args.crashes)
+    seeds = {name: Path(build(work / f"seed_{name}.mcap", **kw)).read_bytes() for name, kw in SEEDS.items()}
+    start = time.monotonic()
+    counts, failures, running = Counter(), [], []
+    started = done = 0
+
+    def make_input() -> tuple[str, str]:
+        path = str(work / f"in_{started % 64}.mcap")
+        if rng.random() < 0.5:
+            seed = str(pick(rng, list(seeds)))
+            kind, data = byte_mutation(rng, seeds[seed])
+            Path(path).write_bytes(data)
+            return path, f"bytes:{kind}:{seed}"
+        return path, "structure:" + structure_mutation(rng, path)
+
+    def finish(run: Run, hung: bool = False) -> None:
+        nonlocal done
+        cls, detail = run.result(hung)
+        done += 1
+        counts[cls.split()[0] if cls.startswith("traceback") else cls] += 1
+        if cls not in ("ok", "accum error"):
+            crashes.mkdir(parents=True, exist_ok=True)
+            name = crashes / f"{cls.split()[0]}_{args.seed}_{done:05d}.mcap"
+            name.write_bytes(run.data)
+            name.with_suffix(".txt").write_text(f"{run.kind}\n{cls}\n{detail}\n")
+            last = detail.strip().splitlines()[-1] if detail.strip() else ""
+            failures.append((cls, run.kind, last))
+        if done % 500 == 0:
+            print(f"  {done} inputs, {time.monotonic() - start:.0f} s, failures {len(failures)}", flush=True)
+
+    while True:
+        out_of_time = args.seconds is not None and time.monotonic() - start > args.seconds
+        while len(running) < args.workers and started < args.count and not out_of_time:
+            path, kind = make_input()
+            started += 1
+            running.append(Run(path, kind))
+        if not running:
+            break
+        timeout = max(0.0, min(r.deadline for r in running) - time.monotonic())
+        ready, _, _ = select.select([r.fd for r in running], [], [], timeout)
+        for run in list(running):
+            if run.fd in ready and run.read():
+                running.remove(run)
+                finish(run)
+            elif run.fd not in ready and time.monotonic() > run.deadline:
+                running.remove(run)
+                finish(run, hung=True)
+    elapsed = time.monotonic() - start
+    print(f"inputs run   {done} in {elapsed:.0f} s ({done / max(elapsed, 1e-9):.1f}/s, {args.workers} workers, "
+          f"{TIMEOUT_S} s timeout, RLIMIT_AS {MEMORY_LIMIT >> 30} GiB)")
+    for cls in ("ok", "accum error", "traceback", "hang", "memory limit", "signal", "foreign output"):
+        print(f"  {cls:<15} {counts.get(cls, 0)}")
+    for cls, kind, last in failures[:40]:
+        print(f"  FAIL {cls} [{kind}] {last}")
+    if failures:
+        print(f"failing inputs saved in {crashes}")
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
