@@ -332,7 +332,8 @@ class _Pairing:
 
     ``add`` returns the pairs it completes as (left, right) ``_PendingImage``;
     ``unpaired`` is called for each image given up. Measures the offset of each
-    image to the nearest recent one on the other side (``typical_offset_ns``).
+    pair, and of each image given up to the nearest of the last 8 on the other
+    side (``typical_offset_ns``, the median).
     """
 
     def __init__(self, left_topic: str, tolerance_ns: int, unpaired: Callable):
@@ -349,8 +350,6 @@ class _Pairing:
     def add(self, topic: str, item: _PendingImage) -> list[tuple[_PendingImage, _PendingImage]]:
         is_left = topic == self.left_topic
         self.recent[is_left].append(item.t_ns)
-        if is_left:
-            self._offset(True, item.t_ns)
         partners = self.pending[not is_left]
         while partners and partners[0].t_ns < item.t_ns - self.tolerance_ns:
             self._give_up(not is_left, partners.popleft())
@@ -362,11 +361,12 @@ class _Pairing:
                 self._give_up(is_left, mine.popleft())
             return []
         partners.remove(match)
+        if len(self.offsets) < OFFSET_SAMPLES:
+            self.offsets.append(abs(match.t_ns - item.t_ns))
         return [(item, match) if is_left else (match, item)]
 
     def _give_up(self, is_left: bool, item: _PendingImage) -> None:
-        if not is_left:
-            self._offset(False, item.t_ns)
+        self._offset(is_left, item.t_ns)
         self.unpaired(is_left, item)
 
     def finish(self) -> None:
@@ -421,6 +421,8 @@ class Recording:
             raise self._fail("empty file")
         with open(self.path, "rb") as f:
             head = f.read(len(MCAP_MAGIC))
+            f.seek(max(self.size - len(MCAP_MAGIC), 0))
+            self.truncated = f.read() != MCAP_MAGIC or self.size < 2 * len(MCAP_MAGIC)
         if head != MCAP_MAGIC:
             raise self._fail("not an MCAP file (wrong magic bytes)")
 
@@ -524,13 +526,12 @@ class Recording:
         self.stereo_offset_ns = pairing.typical_offset_ns
         self._channels = {c.topic: c for c in self._channels_seen.values()}
         if not self._channels:
-            how = "truncated" if not scan.footer else "corrupt"
+            how = "truncated" if self.truncated else "corrupt"
             raise self._fail(f"{how} MCAP file: no readable channel in its {self.size} bytes"
                              + (f" ({scan.broken})" if scan.broken else ""))
         if not scan.footer:
             last = f"{scan.last_time_ns * 1e-9:.3f} s" if scan.last_time_ns is not None else "none"
-            what = "truncated recording (no MCAP footer)" if scan.broken == "no footer" else \
-                f"damaged recording ({scan.broken})"
+            what = "truncated recording (no MCAP footer)" if self.truncated else f"damaged recording ({scan.broken})"
             log.warning("%s: %s: read up to byte %d of %d, %d bytes lost; last message read at %s", self.path,
                         what, self.size - scan.lost_bytes, self.size, scan.lost_bytes, last)
 
