@@ -45,3 +45,9 @@ sample: $(VENV)/.installed
 
 clean:
 	rm -rf $(VENV) out .pytest_cache
+
+# Mutated recordings through info, extraction and accumulation (10,000 inputs by default; bounded:
+# make fuzz FUZZ_ARGS="--count 500" or FUZZ_ARGS="--seconds 120"). Failing inputs go to out/fuzz_crashes/.
+.PHONY: fuzz
+fuzz: $(VENV)/.installed-test
+	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python benchmarks/fuzz.py $(FUZZ_ARGS)

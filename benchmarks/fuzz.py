@@ -413,6 +413,158 @@ def byte_mutation(rng: np.random.Generator, data: bytes) -> tuple[str, bytes]:
     return kind, bytes(data)
 
 
+# -- regression corpus -----------------------------------------------------------------------------
+def _patch(path: str, edit) -> str:
+    data = bytearray(Path(path).read_bytes())
+    edit(data, [p for p in record_offsets(bytes(data))])
+    Path(path).write_bytes(bytes(data))
+    return path
+
+
+def _chunks(data, offsets):
+    return [p for p in offsets if data[p] == 0x06]
+
+
+def _set(data, at, fmt, value):
+    data[at:at + struct.calcsize(fmt)] = struct.pack(fmt, value)
+
+
+def _cal(field, value, side="right"):
+    def edit(s, msg):
+        if s == side:
+            if field == "size":
+                msg.width, msg.height = value
+            else:
+                del getattr(msg, field)[:]
+                getattr(msg, field).extend(value)
+        return msg
+    return edit
+
+
+def _image(i_bad, fn):
+    return lambda side, i, msg: fn(msg) if i == i_bad else msg
+
+
+def _corrupt_png(msg):
+    data = bytearray(msg.data)
+    data[60] ^= 0xFF
+    msg.data = bytes(data)
+    return msg
+
+
+def _bomb(msg):
+    msg.data = png_bomb(4000, 4000)
+    return msg
+
+
+def _big_msg(msg):
+    return png_with_size(msg, 20000, 20000)
+
+
+def _tf(**changes):
+    rows = [("camera_left", "gripper", T0 + i * PERIOD, (0.01 * i, 0, 0.5), (0, 0, 0, 1)) for i in range(3)]
+    for i, row in changes.items():
+        rows[int(i[1:])] = row
+    return rows
+
+
+CORPUS = {  # name: (class, expected outcome, how to make it)
+    "undefined_channel": ("1 KeyError: message on an undefined channel id", "warning: on undefined channel id 999",
+                          lambda p: _patch(build(p, chunked=False), lambda d, o: _set(
+                              d, [x for x in o if d[x] == 0x05][-1] + 9, "<H", 999))),
+    "huge_record_length": ("1 MemoryError/OverflowError: a record length of 2^64-1",
+                           "warning: declares 18446744073709551615 bytes",
+                           lambda p: _patch(build(p, chunk_size=1), lambda d, o: _set(
+                               d, _chunks(d, o)[-1] + 1, "<Q", (1 << 64) - 1))),
+    "lying_string_length": ("1 struct.error: a string length beyond its record", "error: missing calibration",
+                            lambda p: _patch(build(p, chunked=False), lambda d, o: _set(
+                                d, [x for x in o if d[x] == 0x04][0] + 13, "<I", 0xFFFFFFFF))),
+    "corrupt_zstd": ("1 ZstdError: a corrupt zstd chunk", "warning: zstd data corrupt",
+                     lambda p: _patch(build(p, chunk_size=1), lambda d, o: _set(
+                         d, _chunks(d, o)[-1] + 9 + 40 + 8, "<I", 0))),
+    "corrupt_lz4": ("1 lz4 RuntimeError: a corrupt lz4 chunk", "warning: lz4 data corrupt",
+                    lambda p: _patch(build(p, chunk_size=1, compression="lz4"), lambda d, o: _set(
+                        d, _chunks(d, o)[-1] + 9 + 39 + 8, "<I", 0x12345678))),
+    "lying_chunk_size": ("1 MemoryError: a chunk declaring 2^62 uncompressed bytes", "warning: (limit 256 MiB)",
+                         lambda p: _patch(build(p, chunk_size=1), lambda d, o: _set(
+                             d, _chunks(d, o)[-1] + 25, "<Q", 1 << 62))),
+    "crc_mismatch": ("CRC damage (was never detected)", "warning: damaged (CRC mismatch): its 1 messages skipped",
+                     lambda p: _patch(build(p, chunk_size=1, compression="none"), lambda d, o: d.__setitem__(
+                         _chunks(d, o)[-2] + 60, d[_chunks(d, o)[-2] + 60] ^ 1))),
+    "truncated": ("truncated file (was refused)", "warning: truncated recording (no MCAP footer)",
+                  lambda p: Path(p).write_bytes(Path(build(p, chunk_size=1)).read_bytes()[:-1200]) and p),
+    "broken_descriptor": ("2 protobuf DecodeError: a broken schema descriptor set", "ok",
+                          lambda p: build(p, extra=[("/stereo/left/calibration", calibration_to_msg(
+                              calibration("left"), T0), T0, "foxglove.CameraCalibration", b"\x0a\xff!", "protobuf")])),
+    "wrong_type": ("3 AttributeError: a topic carrying another message type",
+                   "error: topic /stereo/right/calibration carries foxglove.FrameTransform",
+                   lambda p: build(p, extra=[("/stereo/right/calibration", FrameTransform(), T0 + 1, None, None,
+                                              "protobuf")])),
+    "huge_quaternion": ("4 scipy zero norm: a quaternion of 1e200 parts", "ok",
+                        lambda p: build(p, tf=_tf(r1=("camera_left", "gripper", T0 + PERIOD, (0, 0, 0.5),
+                                                      (0, 0, 1e200, 1e200))))),
+    "timestamp_int64_limit": ("5 OverflowError: timestamps near 2^63 ns", "ok",
+                              lambda p: build(p, left_times=[(1 << 63) - 3 + i for i in range(3)],
+                                              right_times=[(1 << 63) - 3 + i for i in range(3)],
+                                              tf=[("camera_left", "gripper", (1 << 63) - 3 + i, (0, 0, 0.5),
+                                                   (0, 0, 0, 1)) for i in range(3)])),
+    "timestamp_beyond_int64": ("5 OverflowError: a timestamp of 2^70 ns", "warning: outside the int64 nanosecond",
+                               lambda p: build(p, left_times=[T0, 1 << 70, T0 + 2 * PERIOD])),
+    "calibration_65536": ("6 16 GiB remap tables: a 65536 x 65536 calibration", "error: outside 1..16384 pixels",
+                          lambda p: build(p, raw=True, cal_edit=_cal("size", (65536, 65536), "left"))),
+    "calibration_D11": ("6 OpenCV assertion: 11 distortion coefficients", "error: D has 11 coefficients",
+                        lambda p: build(p, raw=True, cal_edit=_cal("D", [0.01] * 11))),
+    "calibration_nan_K": ("6 NaN in K (exit 0, 0 segments)", "error: K holds NaN",
+                          lambda p: build(p, raw=True, cal_edit=_cal("K", [float("nan")] + [0.0] * 8))),
+    "baseline_negative": ("6 negative baseline", "error: has the wrong sign",
+                          lambda p: build(p, right_cal=calibration("right", baseline=-0.08))),
+    "baseline_zero": ("6 zero baseline", "error: the baseline is 0 m",
+                      lambda p: build(p, right_cal=calibration("right", baseline=0.0))),
+    "baseline_nan": ("6 NaN baseline (info said baseline nan mm)", "error: P holds NaN",
+                     lambda p: build(p, right_cal=calibration("right", baseline=float("nan")))),
+    "png_header_100000": ("7 a PNG header declaring 100000 x 100000", "warning: size 100000x100000 is outside",
+                          lambda p: build(p, image_edit=_image(1, lambda m: png_with_size(m, 100000, 100000)))),
+    "png_bomb": ("7 a PNG bomb (16 Mpx of zeros in 16 KB)", "warning: image size 4000x4000 differs",
+                 lambda p: build(p, image_edit=_image(1, _bomb))),
+    "corrupt_png": ("7 libpng error on the terminal", "warning: libpng error",
+                    lambda p: build(p, image_edit=_image(2, _corrupt_png))),
+    "huge_image_and_calibration": ("8 out of memory: 20000 x 20000 images matching their calibration",
+                                   "error: size 20000x20000 is outside 1..16384 pixels",
+                                   lambda p: build(p, cal_edit=lambda s, m: _cal("size", (20000, 20000), s)(s, m),
+                                                   image_edit=lambda s, i, m: _big_msg(m))),
+    "image_size_mismatch": ("8 image not of its calibration's size", "warning: differs from the calibration's",
+                            lambda p: build(p, cal_edit=lambda s, m: _cal("size", (320, 240), s)(s, m))),
+    "tf_translation_1e20": ("/tf translation of 1e20 (NaN in the model)", "warning: invalid translation (beyond",
+                            lambda p: build(p, tf=_tf(r1=("camera_left", "gripper", T0 + PERIOD, (1e20, 0, 0),
+                                                          (0, 0, 0, 1))))),
+    "stereo_offset_5ms": ("no pair within 1 ms (exit 0, empty model)",
+                          "error: left and right images are 5.0 ms apart; try --tolerance-ms 6",
+                          lambda p: build(p, right_times=[T0 + i * PERIOD + 5_000_000 for i in range(3)])),
+    "no_object_frame": ("extract refused without the object frame", "ok",
+                        lambda p: build(p, tf=[("world", "board", T0, (0, 0, 1), (0, 0, 0, 1))])),
+    "odd_timestamps": ("negative, duplicate and out-of-order timestamps", "ok",
+                       lambda p: build(p, left_times=[-PERIOD, -2 * PERIOD, -2 * PERIOD],
+                                       right_times=[-PERIOD, -2 * PERIOD, -2 * PERIOD],
+                                       tf=[("camera_left", "gripper", t, (0, 0, 0.5), (0, 0, 0, 1))
+                                           for t in (-2 * PERIOD, -PERIOD, -2 * PERIOD)])),
+    "tf_cycle": ("a cycle in the tf tree", "warning: has several parents",
+                 lambda p: build(p, tf=[("camera_left", "gripper", T0, (0, 0, 0.5), (0, 0, 0, 1)),
+                                        ("gripper", "camera_left", T0, (0, 0, -0.4), (0, 0, 0, 1)),
+                                        ("world", "gripper", T0, (1, 0, 0), (0, 0, 0, 1))])),
+}
+
+
+def write_corpus(folder) -> None:
+    """The regression inputs and their index ("name | class | expected outcome" per line)."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    lines = []
+    for name, (cls, outcome, make) in CORPUS.items():
+        make(str(folder / f"{name}.mcap"))
+        lines.append(f"{name}.mcap | {cls} | {outcome}")
+    (folder / "index.txt").write_text("\n".join(lines) + "\n")
+
+
 # -- running ------------------------------------------------------------------------------------
 def exercise(path: str) -> None:
     """info, then extraction and accumulation of the first frames; only AccumError may escape."""
@@ -493,7 +645,11 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--crashes", default=str(ROOT / "out" / "fuzz_crashes"))
+    ap.add_argument("--write-corpus", metavar="DIR", help="write the regression corpus to DIR and stop")
     args = ap.parse_args(argv)
+    if args.write_corpus:
+        write_corpus(args.write_corpus)
+        return 0
     rng = np.random.default_rng(args.seed)
     work = Path(tempfile.mkdtemp(prefix="accum-fuzz-"))
     crashes = Path(args.crashes)
