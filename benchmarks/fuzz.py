@@ -314,6 +314,8 @@ def m_pose_values(rng, kw):
 
 def m_timestamps(rng, kw):
     n = kw.get("n", 3)
+    if n == 0:
+        return
     base = [T0 + i * PERIOD for i in range(n)]
     kind = int(rng.integers(5))
     if kind == 0:
@@ -665,7 +667,14 @@ def main(argv=None) -> int:
             kind, data = byte_mutation(rng, seeds[seed])
             Path(path).write_bytes(data)
             return path, f"bytes:{kind}:{seed}"
-        return path, "structure:" + structure_mutation(rng, path)
+        try:
+            return path, "structure:" + structure_mutation(rng, path)
+        except Exception as e:  # noqa: BLE001 - a combination the builder cannot write: counted, not run
+            counts["builder error"] += 1
+            print(f"  builder error: {type(e).__name__}: {e}", flush=True)
+            kind, data = byte_mutation(rng, seeds["png"])
+            Path(path).write_bytes(data)
+            return path, f"bytes:{kind}:png"
 
     def finish(run: Run, hung: bool = False) -> None:
         nonlocal done
@@ -702,7 +711,8 @@ def main(argv=None) -> int:
     elapsed = time.monotonic() - start
     print(f"inputs run   {done} in {elapsed:.0f} s ({done / max(elapsed, 1e-9):.1f}/s, {args.workers} workers, "
           f"{TIMEOUT_S} s timeout, RLIMIT_AS {MEMORY_LIMIT >> 30} GiB)")
-    for cls in ("ok", "accum error", "traceback", "hang", "memory limit", "signal", "foreign output"):
+    for cls in ("ok", "accum error", "traceback", "hang", "memory limit", "signal", "foreign output",
+                "builder error"):
         print(f"  {cls:<15} {counts.get(cls, 0)}")
     for cls, kind, last in failures[:40]:
         print(f"  FAIL {cls} [{kind}] {last}")
