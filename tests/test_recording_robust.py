@@ -358,3 +358,14 @@ def test_without_the_object_frame_frames_carry_no_pose(tmp_path):
     frames = frames_of(path, require_pose=False)
     assert len(frames) == 3 and all(f.T_camera_object is None for f in frames)
     assert frames[0].pose_problem == "no path from camera_left to gripper in the transform tree"
+
+
+def test_info_counts_do_not_depend_on_earlier_passes(tmp_path):
+    path = fuzz.build(tmp_path / "r.mcap", n=4, tf=tf_samples(n=4))
+    with Recording(path) as rec:
+        next(rec.frames())
+        info = rec.info()
+    assert dict((t, c) for t, _, c in info.topics) == {
+        "/stereo/left/calibration": 1, "/stereo/left/image": 4, "/stereo/right/calibration": 1,
+        "/stereo/right/image": 4, "/tf": 4}
+    assert info.stereo_frames == 4 and info.stereo_offset_ms == 0.0 and info.lost_bytes == 0

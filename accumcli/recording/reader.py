@@ -431,19 +431,25 @@ class Recording:
         return {t.left_image: IMAGE_TYPES, t.right_image: IMAGE_TYPES, t.left_calibration: CALIBRATION_TYPES,
                 t.right_calibration: CALIBRATION_TYPES, t.tf: TF_TYPES, t.tf_static: TF_TYPES}
 
-    def _scan(self, warn: LimitedWarnings, wanted: set[str]) -> Iterator[tuple[str, int, object]]:
-        """(topic, log_time_ns, decoded message) of the ``wanted`` topics, in file order."""
+    def _scan(self, warn: LimitedWarnings, wanted: set[str],
+              first: bool = False) -> Iterator[tuple[str, int, object]]:
+        """(topic, log_time_ns, decoded message) of the ``wanted`` topics, in file order.
+
+        The ``first`` pass also counts the messages per channel and keeps the channels and the scan's
+        damage report (``_first_scan``).
+        """
         channels, schemas, roles = {}, {}, self._roles()
         scan = _McapScan(self.path, warn, channels, schemas)
-        self._last_scan = scan
-        self.message_counts: dict[int, int] = {}
+        counts: dict[int, int] = {}
+        if first:
+            self._first_scan, self.message_counts, self._channels_seen = scan, counts, channels
         for message in scan.messages():
             channel = channels.get(message.channel_id)
             if channel is None:
                 warn("undefined channel", "%s: message at %.3f s on undefined channel id %d: skipped", self.path,
                      message.log_time * 1e-9, message.channel_id)
                 continue
-            self.message_counts[channel.id] = self.message_counts.get(channel.id, 0) + 1
+            counts[channel.id] = counts.get(channel.id, 0) + 1
             if channel.topic not in wanted:
                 continue
             types = roles[channel.topic]
@@ -458,7 +464,6 @@ class Recording:
                      self.path, channel.topic, message.log_time * 1e-9, e)
                 continue
             yield channel.topic, message.log_time, decoded
-        self._channels_seen = channels
 
     def _stamp(self, msg, log_time: int, warn: LimitedWarnings, topic: str) -> int | None:
         if not msg.HasField("timestamp"):
@@ -482,7 +487,7 @@ class Recording:
         pairing = _Pairing(t.left_image, self.tolerance_ns, count_unpaired)
         wanted = set(self._roles())
         with LimitedWarnings(log, prefix=f"{self.path}: ") as warn:
-            for topic, log_time, msg in self._scan(warn, wanted):
+            for topic, log_time, msg in self._scan(warn, wanted, first=True):
                 if topic in (t.left_image, t.right_image):
                     t_ns = self._stamp(msg, log_time, warn, topic)
                     if t_ns is not None:
@@ -520,7 +525,7 @@ class Recording:
             for child, parents in self.tree.ambiguous_frames().items():
                 warn("several parents", "%s: frame %r has several parents (%s) in the transform tree: lookups "
                      "take the shortest path", self.path, child, ", ".join(map(repr, parents)))
-        scan = self._last_scan
+        scan = self._first_scan
         self.lost_bytes = scan.lost_bytes
         self.unpaired_count = unpaired["count"]
         self.stereo_offset_ns = pairing.typical_offset_ns
