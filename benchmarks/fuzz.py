@@ -164,7 +164,8 @@ def build(path, *, n=3, width=160, height=120, encoding="png", raw=False, tf_tre
                 msg.timestamp.seconds, msg.timestamp.nanos = int(t // 1_000_000_000), int(t % 1_000_000_000)
             if image_edit:
                 msg = image_edit(side, i, msg) or msg
-            b.message(topic, msg, min(max(t, 0), 1 << 62))
+            b.message(topic, msg, min(max(t, 0), 1 << 62), "foxglove.CompressedImage" if isinstance(msg, bytes)
+                      else None, b"" if isinstance(msg, bytes) else None)
     for topic, msg, t_ns, schema_name, schema_data, enc in extra:
         b.message(topic, msg, t_ns, schema_name, schema_data, enc)
     b.close()

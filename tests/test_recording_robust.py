@@ -369,3 +369,28 @@ def test_info_counts_do_not_depend_on_earlier_passes(tmp_path):
         "/stereo/left/calibration": 1, "/stereo/left/image": 4, "/stereo/right/calibration": 1,
         "/stereo/right/image": 4, "/tf": 4}
     assert info.stereo_frames == 4 and info.stereo_offset_ms == 0.0 and info.lost_bytes == 0
+
+
+def test_an_image_topic_without_readable_images(tmp_path, caplog):
+    path = fuzz.build(tmp_path / "r.mcap", compression="none", chunk_size=1)
+    data = bytearray(Path(path).read_bytes())
+    for chunk in chunk_offsets(bytes(data))[-5::2]:  # the chunks of the three right images
+        data[chunk + 9 + struct.unpack_from("<Q", data, chunk + 1)[0] - 40] ^= 0x01
+    Path(path).write_bytes(bytes(data))
+    with pytest.raises(RecordingError, match=r"r.mcap: no readable image on /stereo/right/image$"):
+        Recording(path, require_pose=False)
+    assert caplog.text.count("(CRC mismatch): its 1 messages skipped") == 3
+
+
+def test_no_pair_because_the_images_of_one_camera_do_not_parse(tmp_path, caplog):
+    path = fuzz.build(tmp_path / "r.mcap", image_edit=lambda side, i, msg: b"\xff\xff" if side == "left" else msg)
+    with pytest.raises(RecordingError, match="no stereo pair: the images of one camera cannot be read"):
+        Recording(path, require_pose=False)
+    assert caplog.text.count("message on /stereo/left/image at") == 3
+
+
+def test_no_pair_because_one_camera_cannot_be_read(tmp_path, caplog):
+    path = fuzz.build(tmp_path / "r.mcap", right_times=[1 << 70] * 3)
+    with pytest.raises(RecordingError, match="no stereo pair: the images of one camera cannot be read"):
+        Recording(path)
+    assert caplog.text.count("outside the int64 nanosecond range") == 3

@@ -38,8 +38,9 @@ Choices where formats.md is silent:
   (calibrations are normally static; a warning says so once).
 - A transform on ``/tf_static`` is static whatever its count of samples. A frame
   with several parents (a cycle) is a warning; lookups take the shortest path.
-- When images exist on both topics but none pair, opening fails with the
-  measured typical left/right offset and the tolerance to try.
+- No silent empty recording: opening fails when an image topic has no readable
+  message, and when images exist on both topics but none pair (with the
+  measured typical left/right offset and the tolerance to try).
 """
 
 from __future__ import annotations
@@ -558,9 +559,12 @@ class Recording:
         if require_pose and t.tf not in self._channels and t.tf_static not in self._channels:
             raise self._fail(f"missing topic {t.tf}: no transforms, so no pose of {self.object_frame!r} "
                              f"(topics found: {available})")
-        counts = {topic: self.message_counts.get(self._channels[topic].id, 0)
-                  for topic in (t.left_image, t.right_image)}
-        if self.frame_count_hint == 0 and all(counts.values()) and self.stereo_offset_ns is not None:
+        for topic in (t.left_image, t.right_image):
+            if not self.message_counts.get(self._channels[topic].id, 0):
+                raise self._fail(f"no readable image on {topic}{self._lost()}")
+        if self.frame_count_hint == 0:
+            if self.stereo_offset_ns is None:
+                raise self._fail("no stereo pair: the images of one camera cannot be read (see the warnings)")
             offset_ms = self.stereo_offset_ns * 1e-6
             raise self._fail(f"no stereo pair within {self.tolerance_ns * 1e-6:.1f} ms: left and right images are "
                              f"{offset_ms:.1f} ms apart; try --tolerance-ms {math.floor(offset_ms) + 1}")
