@@ -33,7 +33,8 @@ def test_index_names_every_input_and_the_corpus_is_small():
 
 
 @pytest.mark.parametrize("name, cls, outcome", entries(), ids=[e[0] for e in entries()])
-def test_corpus_input(name, cls, outcome, caplog, capfd):
+def test_corpus_input(name, cls, outcome, caplog, capfd, monkeypatch):
+    monkeypatch.setattr(logging.getLogger("accumcli"), "handlers", [])  # the CLI's, if a CLI test ran before
     caplog.set_level(logging.WARNING, logger="accumcli")
     kind, _, text = outcome.partition(": ")
     if kind == "error":

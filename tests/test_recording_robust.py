@@ -27,7 +27,8 @@ T0, PERIOD = fuzz.T0, fuzz.PERIOD
 
 
 @pytest.fixture(autouse=True)
-def _warnings(caplog):
+def _warnings(caplog, monkeypatch):
+    monkeypatch.setattr(logging.getLogger("accumcli"), "handlers", [])  # the CLI's, if a CLI test ran before
     caplog.set_level(logging.WARNING, logger="accumcli")
 
 
