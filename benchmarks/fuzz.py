@@ -22,6 +22,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
+import functools  # noqa: E402
 import logging  # noqa: E402
 import resource  # noqa: E402
 import select  # noqa: E402
@@ -189,6 +190,7 @@ def png_with_size(msg, width: int, height: int):
     return msg
 
 
+@functools.lru_cache(maxsize=8)
 def png_bomb(width: int, height: int) -> bytes:
     """A valid grey PNG of width x height zeros (highly compressible: a decompression bomb when large)."""
     row = b"\x00" * (width + 1)
@@ -235,7 +237,7 @@ def m_lying_png(rng, kw):
 
 
 def m_png_bomb(rng, kw):
-    size = [(20000, 20000), (16384, 1024), (4000, 4000), (160, 120)][int(rng.integers(4))]
+    size = [(20000, 20000), (16384, 1024), (4000, 4000), (5000, 5000), (160, 120)][int(rng.integers(5))]
     data = png_bomb(*size)
     kw["encoding"] = "png"
     if rng.random() < 0.3 and size[0] * size[1] <= 1 << 24:

@@ -139,7 +139,10 @@ def decode_image(msg, expected_size: tuple[int, int] | None = None) -> np.ndarra
     if hasattr(msg, "format"):
         buffer = np.frombuffer(msg.data, np.uint8)
         with _CapturedStderr() as captured:
-            image = cv2.imdecode(buffer, cv2.IMREAD_UNCHANGED)
+            try:
+                image = cv2.imdecode(buffer, cv2.IMREAD_UNCHANGED)
+            except cv2.error:
+                image = None
         if image is None:
             said = " ".join(captured.text.split())[:200]
             raise DecodeError(f"cannot decode {msg.format or 'compressed'} image bytes ({len(msg.data)} bytes)"
