@@ -283,6 +283,43 @@ def m_calibration_values(rng, kw):
     _chain(kw, "cal_edit", edit)
 
 
+def m_intrinsics(rng, kw):
+    fx = float(pick(rng, [1e-300, 1e-6, 1e6, 1e200, 1e300, 150.0]))
+    baseline = float(pick(rng, [1e-300, 1e-9, 0.08, 1e6, 1e300]))
+    w, h = kw.get("width", 160), kw.get("height", 120)
+    kw["left_cal"] = calibration("left", w, h, fx=fx, raw=kw.get("raw", False))
+    kw["right_cal"] = calibration("right", w, h, fx=fx, baseline=baseline, raw=kw.get("raw", False))
+
+
+def m_lying_jpeg(rng, kw):
+    kw["encoding"] = "jpeg"
+    w, h = (int(pick(rng, [0, 1, 161, 65535, 16384])) for _ in range(2))
+
+    def edit(side, i, msg):
+        data = bytearray(msg.data)
+        at = bytes(data).find(b"\xff\xc0")
+        if at > 0 and rng.random() < 0.8:
+            data[at + 5:at + 9] = struct.pack(">HH", h, w)
+        elif data:
+            data[int(rng.integers(2, len(data)))] = int(rng.integers(256))
+        msg.data = bytes(data)
+        return msg
+    _chain(kw, "image_edit", lambda side, i, msg: edit(side, i, msg) if getattr(msg, "format", "") == "jpeg"
+           else msg)
+
+
+def m_frame_transforms(rng, kw):
+    many = FrameTransforms()
+    for i in range(int(rng.integers(0, 4))):
+        t = many.transforms.add(parent_frame_id=str(pick(rng, ["camera_left", "world", ""])),
+                                child_frame_id=str(pick(rng, ["gripper", "world", ""])))
+        t.timestamp.CopyFrom(to_stamp(T0 + i * PERIOD))
+        t.rotation.w = float(pick(rng, [1.0, 0.0, float("nan")]))
+    extra = list(kw.get("extra", ()))
+    extra.append(("/tf", many, T0, None, None, "protobuf"))
+    kw["extra"] = extra
+
+
 def m_calibration_shape(rng, kw):
     def edit(side, msg):
         choice = int(rng.integers(4))
@@ -374,7 +411,8 @@ def m_missing(rng, kw):
 
 STRUCTURE = {f.__name__[2:]: f for f in (m_lying_png, m_png_bomb, m_lying_raw, m_garbage_image, m_calibration_values,
                                           m_calibration_shape, m_baseline, m_pose_values, m_timestamps, m_offset,
-                                          m_tf_cycle, m_wrong_schema, m_missing)}
+                                          m_tf_cycle, m_wrong_schema, m_missing, m_intrinsics, m_lying_jpeg,
+                                          m_frame_transforms)}
 
 
 # -- byte-level mutations -------------------------------------------------------------------------

@@ -12,6 +12,7 @@ the ``DecodeError`` or is dropped, never written to the terminal.
 
 from __future__ import annotations
 
+import atexit
 import os
 import struct
 import tempfile
@@ -100,6 +101,7 @@ class _CapturedStderr:
         self._lock.acquire()
         if _CapturedStderr._file is None:
             _CapturedStderr._file = tempfile.TemporaryFile()
+            atexit.register(_CapturedStderr._file.close)
         self._file.seek(0)
         self._file.truncate()
         self._saved = os.dup(2)
