@@ -395,3 +395,13 @@ def test_no_pair_because_one_camera_cannot_be_read(tmp_path, caplog):
     with pytest.raises(RecordingError, match="no stereo pair: the images of one camera cannot be read"):
         Recording(path)
     assert caplog.text.count("outside the int64 nanosecond range") == 3
+
+
+def test_a_record_longer_than_any_chunk_is_not_read(tmp_path, caplog, monkeypatch):
+    from accumcli.recording import reader
+    path = fuzz.build(tmp_path / "r.mcap", chunk_size=1)
+    first = chunk_offsets(Path(path).read_bytes())[0]
+    monkeypatch.setattr(reader, "MAX_RECORD_BYTES", 100)  # the chunks (and schemas) are now "too long"
+    with pytest.raises(RecordingError, match="topic /stereo/left/image carries no schema, expected"):
+        Recording(path)
+    assert re.search(rf"record at byte {first} declares \d+ bytes \(limit 100\): skipped", caplog.text)

@@ -76,6 +76,7 @@ log = logging.getLogger("accumcli")
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 MAX_PENDING_IMAGES = 64
 MAX_CHUNK_BYTES = 1 << 28   # uncompressed bytes of one chunk (256 MiB)
+MAX_RECORD_BYTES = MAX_CHUNK_BYTES + 4096  # bytes of one record that is read (longer ones are skipped)
 OFFSET_SAMPLES = 4096       # left/right offsets kept to measure the typical one
 
 IMAGE_TYPES = {"foxglove.CompressedImage": CompressedImage, "foxglove.RawImage": RawImage}
@@ -298,7 +299,11 @@ class _McapScan:
                 if opcode == _OP_FOOTER:
                     self.footer = True
                     break
-                if opcode not in (_OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK):
+                too_long = length > MAX_RECORD_BYTES
+                if too_long and opcode in (_OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK):
+                    self.warn("damaged record", "%s: record at byte %d declares %d bytes (limit %d): skipped",
+                              self.path, pos, length, MAX_RECORD_BYTES)
+                if too_long or opcode not in (_OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK):
                     file.seek(length, os.SEEK_CUR)
                     pos += 9 + length
                     continue
