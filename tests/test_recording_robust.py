@@ -405,3 +405,14 @@ def test_a_record_longer_than_any_chunk_is_not_read(tmp_path, caplog, monkeypatc
     with pytest.raises(RecordingError, match="topic /stereo/left/image carries no schema, expected"):
         Recording(path)
     assert re.search(rf"record at byte {first} declares \d+ bytes \(limit 100\): skipped", caplog.text)
+
+
+def test_unreadable_file(tmp_path, monkeypatch):
+    from accumcli.recording import reader
+    path = fuzz.build(tmp_path / "r.mcap")
+
+    def denied(*args, **kwargs):
+        raise PermissionError(13, "Permission denied")
+    monkeypatch.setattr(reader, "open", denied, raising=False)
+    with pytest.raises(RecordingError, match=r"r.mcap: cannot be read \(Permission denied\)$"):
+        Recording(path)

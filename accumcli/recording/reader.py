@@ -185,9 +185,9 @@ class _Message:
     data: memoryview
 
 
-def _records(data: memoryview, start: int = 0) -> Iterator[tuple[int, int, memoryview]]:
-    """(offset, opcode, content) of the records in ``data`` from ``start``; raises _Malformed."""
-    pos, n = start, len(data)
+def _records(data: memoryview) -> Iterator[tuple[int, int, memoryview]]:
+    """(offset, opcode, content) of the records in ``data``; raises _Malformed."""
+    pos, n = 0, len(data)
     while pos < n:
         if pos + 9 > n:
             raise _Malformed(f"a record header at byte {pos} is cut off")
@@ -391,6 +391,10 @@ class Recording:
 
     With ``require_pose=False`` a recording without /tf or without a path to the
     object frame opens, and its frames carry ``T_camera_object = None``.
+    After opening: ``frame_count_hint`` is the number of stereo pairs (counted
+    in the first pass, exact), ``stereo_offset_ns`` the typical left/right
+    offset (ns, or None), ``lost_bytes`` the bytes of a truncated or damaged
+    file that could not be read.
     """
 
     def __init__(self, path, topics: Topics = Topics(), camera_frame: str = "camera_left",
@@ -425,10 +429,13 @@ class Recording:
         self.size = os.path.getsize(self.path)
         if self.size == 0:
             raise self._fail("empty file")
-        with open(self.path, "rb") as f:
-            head = f.read(len(MCAP_MAGIC))
-            f.seek(max(self.size - len(MCAP_MAGIC), 0))
-            self.truncated = f.read() != MCAP_MAGIC or self.size < 2 * len(MCAP_MAGIC)
+        try:
+            with open(self.path, "rb") as f:
+                head = f.read(len(MCAP_MAGIC))
+                f.seek(max(self.size - len(MCAP_MAGIC), 0))
+                self.truncated = f.read() != MCAP_MAGIC or self.size < 2 * len(MCAP_MAGIC)
+        except OSError as e:
+            raise self._fail(f"cannot be read ({e.strerror or e})") from None
         if head != MCAP_MAGIC:
             raise self._fail("not an MCAP file (wrong magic bytes)")
 
