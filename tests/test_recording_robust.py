@@ -416,3 +416,12 @@ def test_unreadable_file(tmp_path, monkeypatch):
     monkeypatch.setattr(reader, "open", denied, raising=False)
     with pytest.raises(RecordingError, match=r"r.mcap: cannot be read \(Permission denied\)$"):
         Recording(path)
+
+
+def test_corrupt_jpeg_that_still_decodes_prints_nothing(capfd):
+    msg = fuzz.image_to_msg(fuzz.scene(0, "left"), 0, "cam", "jpeg")
+    data = bytearray(msg.data)
+    data[335] ^= 0x55  # libjpeg: "Corrupt JPEG data: premature end of data segment", yet an image
+    msg.data = bytes(data)
+    assert decode_image(msg, (160, 120)).shape == (120, 160)
+    assert capfd.readouterr().err == ""
