@@ -50,13 +50,19 @@ def sample_problem(translation, quat_xyzw) -> str | None:
 
 
 def normalised_quats(q: np.ndarray) -> np.ndarray:
-    """(N, 4) unit quaternions of finite non-zero ``q: (N, 4)`` (scaled first: no overflow); others as given."""
-    with np.errstate(invalid="ignore", over="ignore"):
+    """(N, 4) unit quaternions of finite non-zero ``q: (N, 4)``; others as given.
+
+    ``q / |q|`` where the norm is a normal float; rows whose norm overflows or
+    underflows are scaled by their largest part first.
+    """
+    with np.errstate(invalid="ignore", over="ignore", under="ignore"):
         scale = np.abs(q).max(axis=1, keepdims=True)
         ok = np.isfinite(scale) & (scale > 0)
+        norm = np.linalg.norm(q, axis=1, keepdims=True)
+        plain = np.isfinite(norm) & (norm >= np.finfo(float).tiny)
         scaled = q / np.where(ok, scale, 1.0)
-        norm = np.linalg.norm(scaled, axis=1, keepdims=True)
-    return np.where(ok, scaled / np.where(ok, norm, 1.0), q)
+        scaled = scaled / np.where(ok, np.linalg.norm(scaled, axis=1, keepdims=True), 1.0)
+        return np.where(plain, q / np.where(plain, norm, 1.0), np.where(ok, scaled, q))
 
 
 @dataclass
