@@ -33,7 +33,7 @@ import tempfile  # noqa: E402
 import time  # noqa: E402
 import traceback  # noqa: E402
 import zlib  # noqa: E402
-from collections import Counter  # noqa: E402
+from collections import Counter, defaultdict  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import cv2  # noqa: E402
@@ -699,6 +699,7 @@ def main(argv=None) -> int:
     seeds = {name: Path(build(work / f"seed_{name}.mcap", **kw)).read_bytes() for name, kw in SEEDS.items()}
     start = time.monotonic()
     counts, failures, running = Counter(), [], []
+    by_family: dict = defaultdict(Counter)  # mutation family -> outcome counts
     started = done = 0
 
     def make_input() -> tuple[str, str]:
@@ -721,7 +722,10 @@ def main(argv=None) -> int:
         nonlocal done
         cls, detail = run.result(hung)
         done += 1
-        counts[cls.split()[0] if cls.startswith("traceback") else cls] += 1
+        outcome = cls.split()[0] if cls.startswith("traceback") else cls
+        counts[outcome] += 1
+        family = run.kind.split(":")[1] if run.kind.startswith("bytes") else "structure"
+        by_family[family][outcome] += 1
         if cls not in ("ok", "accum error"):
             crashes.mkdir(parents=True, exist_ok=True)
             name = crashes / f"{cls.split()[0]}_{args.seed}_{done:05d}.mcap"
@@ -755,6 +759,8 @@ def main(argv=None) -> int:
     for cls in ("ok", "accum error", "traceback", "hang", "memory limit", "signal", "foreign output",
                 "builder error"):
         print(f"  {cls:<15} {counts.get(cls, 0)}")
+    print("by mutation: " + "; ".join(f"{family} {sum(c.values())} ({c['ok']} ok, {c['accum error']} AccumError)"
+                                      for family, c in sorted(by_family.items())))
     for cls, kind, last in failures[:40]:
         print(f"  FAIL {cls} [{kind}] {last}")
     if failures:
