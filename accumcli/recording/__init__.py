@@ -3,8 +3,8 @@ transform tree, calibration and rectification)."""
 
 from .calibration import CameraCalibration, StereoIntrinsics, StereoRectifier
 from .reader import Recording, RecordingInfo, StereoFrame, Topics
-from .tf_tree import TransformTree
+from .tf_tree import TransformSamples, TransformTree
 from .writer import RecordingWriter
 
 __all__ = ["CameraCalibration", "Recording", "RecordingInfo", "RecordingWriter", "StereoFrame",
-           "StereoIntrinsics", "StereoRectifier", "Topics", "TransformTree"]
+           "StereoIntrinsics", "StereoRectifier", "Topics", "TransformSamples", "TransformTree"]

@@ -5,6 +5,10 @@ left/right pair of them into the rectified stereo intrinsics that everything
 downstream uses, and (for raw images) the remap tables, computed once per
 calibration. Images are taken as already rectified when D is zero, R is the
 identity and K equals P's left 3x3: then they pass through untouched.
+``check_calibration`` refuses, before any table is allocated, what OpenCV
+cannot use: a size outside 1..16384 pixels or beyond 16.8 Mpx, a distortion
+vector that is not 0, 4, 5, 8, 12 or 14 long, non-finite K, D, R or P, focal
+lengths that are not positive, and a baseline that is not finite and positive.
 """
 
 from __future__ import annotations
@@ -17,6 +21,18 @@ import numpy as np
 from ..errors import RecordingError
 
 SUPPORTED_DISTORTION = {"plumb_bob", "rational_polynomial", ""}
+DISTORTION_LENGTHS = (0, 4, 5, 8, 12, 14)
+MAX_SIDE = 16384          # pixels, width or height of an image or calibration
+MAX_PIXELS = 1 << 24      # width * height (16.8 Mpx, e.g. 4096 x 4096)
+
+
+def size_problem(width: int, height: int) -> str | None:
+    """Why an image or calibration size (pixels) is refused, or None."""
+    if not (1 <= width <= MAX_SIDE and 1 <= height <= MAX_SIDE):
+        return f"size {width}x{height} is outside 1..{MAX_SIDE} pixels"
+    if width * height > MAX_PIXELS:
+        return f"size {width}x{height} exceeds the limit of {MAX_PIXELS / 1e6:.1f} Mpx"
+    return None
 
 
 @dataclass(frozen=True)
@@ -82,17 +98,32 @@ class StereoIntrinsics:
         return {k: getattr(self, k) for k in ("fx", "fy", "cx", "cy", "baseline", "width", "height")}
 
 
+def check_calibration(cal: CameraCalibration, side: str) -> None:
+    """Raise ``RecordingError`` naming ``side`` if ``cal`` cannot be used (see the module docstring)."""
+    problem = size_problem(cal.width, cal.height)
+    if problem:
+        raise RecordingError(f"{side} calibration: {problem}")
+    if cal.distortion_model not in SUPPORTED_DISTORTION:
+        raise RecordingError(f"{side} calibration: distortion model {cal.distortion_model!r} is not supported "
+                             f"(expected plumb_bob or rational_polynomial)")
+    if len(cal.D) not in DISTORTION_LENGTHS:
+        raise RecordingError(f"{side} calibration: D has {len(cal.D)} coefficients "
+                             f"(expected {', '.join(map(str, DISTORTION_LENGTHS))})")
+    for name in ("K", "D", "R", "P"):
+        if not np.isfinite(getattr(cal, name)).all():
+            raise RecordingError(f"{side} calibration: {name} holds NaN or infinite values")
+    if cal.P[0, 0] <= 0 or cal.P[1, 1] <= 0:
+        raise RecordingError(f"{side} calibration: P has no positive focal length (uncalibrated camera)")
+    if not cal.is_rectified and (cal.K[0, 0] <= 0 or cal.K[1, 1] <= 0):
+        raise RecordingError(f"{side} calibration: K has no positive focal length (uncalibrated camera)")
+
+
 class StereoRectifier:
     """Rectified intrinsics and (if needed) remap tables for one left/right calibration."""
 
     def __init__(self, left: CameraCalibration, right: CameraCalibration):
         for side, cal in (("left", left), ("right", right)):
-            if cal.distortion_model not in SUPPORTED_DISTORTION:
-                raise RecordingError(
-                    f"{side} calibration: distortion model {cal.distortion_model!r} is not supported "
-                    f"(expected plumb_bob or rational_polynomial)")
-            if cal.P[0, 0] <= 0 or cal.P[1, 1] <= 0:
-                raise RecordingError(f"{side} calibration: P has no focal length (uncalibrated camera)")
+            check_calibration(cal, side)
         if (left.width, left.height) != (right.width, right.height):
             raise RecordingError(f"left and right calibrations differ in size: {left.width}x{left.height} vs "
                                  f"{right.width}x{right.height}")
@@ -100,9 +131,13 @@ class StereoRectifier:
         if not np.allclose(P_left[:, :3], P_right[:, :3], rtol=1e-6, atol=1e-6):
             raise RecordingError("left and right P differ in their 3x3 part: the pair is not rectified to one camera")
         baseline = -P_right[0, 3] / P_right[0, 0] + P_left[0, 3] / P_left[0, 0]
-        if baseline <= 0:
+        if not np.isfinite(baseline) or baseline == 0:
+            raise RecordingError(f"stereo calibration: the baseline is {baseline:g} m (expected finite and "
+                                 f"positive, from the right P[0,3] = -fx * baseline, found {P_right[0, 3]:g})")
+        if baseline < 0:
             raise RecordingError(
-                f"right calibration: expected P[0,3] = -fx * baseline < 0, found {P_right[0, 3]:g}")
+                f"right calibration: P[0,3] = {P_right[0, 3]:g} has the wrong sign (expected -fx * baseline < 0, "
+                f"a baseline of {-baseline:g} m; are left and right swapped?)")
         self.intrinsics = StereoIntrinsics(
             fx=float(P_left[0, 0]), fy=float(P_left[1, 1]), cx=float(P_left[0, 2]), cy=float(P_left[1, 2]),
             baseline=float(baseline), width=int(left.width), height=int(left.height))

@@ -2,9 +2,21 @@
 
 Images become (H, W) uint8 grey arrays: colour is converted with OpenCV's
 weights, mono16 is scaled by 255/65535 (little-endian, as Foxglove's RawImage).
+Before any pixel is decoded, ``image_size`` reads the size from the PNG or JPEG
+header (or the RawImage fields), so an image larger than ``MAX_SIDE`` /
+``MAX_PIXELS`` or of another size than its calibration is refused without
+allocating it. Compressed data must be PNG or JPEG by its signature. What the
+codecs print (libpng, libjpeg, OpenCV's log) is captured and becomes part of
+the ``DecodeError`` or is dropped, never written to the terminal.
 """
 
 from __future__ import annotations
+
+import atexit
+import os
+import struct
+import tempfile
+import threading
 
 import cv2
 import numpy as np
@@ -14,10 +26,15 @@ from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 from google.protobuf.timestamp_pb2 import Timestamp
 
-from .calibration import CameraCalibration
+from .calibration import MAX_PIXELS, MAX_SIDE, CameraCalibration, size_problem  # noqa: F401
 
 RAW_ENCODINGS = {"mono8": (1, np.uint8), "8UC1": (1, np.uint8), "rgb8": (3, np.uint8), "bgr8": (3, np.uint8),
                  "mono16": (1, np.dtype("<u2")), "16UC1": (1, np.dtype("<u2"))}
+
+
+INT64_MIN, INT64_MAX = -(1 << 63), (1 << 63) - 1
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+JPEG_SOI = b"\xff\xd8"
 
 
 class DecodeError(ValueError):
@@ -25,8 +42,78 @@ class DecodeError(ValueError):
 
 
 def stamp_ns(stamp) -> int:
-    """Integer nanoseconds of a protobuf Timestamp."""
-    return int(stamp.seconds) * 1_000_000_000 + int(stamp.nanos)
+    """Integer nanoseconds of a protobuf Timestamp; ValueError outside the int64 range."""
+    t = int(stamp.seconds) * 1_000_000_000 + int(stamp.nanos)
+    if not INT64_MIN <= t <= INT64_MAX:
+        raise ValueError(f"timestamp {int(stamp.seconds)} s is outside the int64 nanosecond range")
+    return t
+
+
+def _jpeg_size(data: bytes) -> tuple[int, int]:
+    """(width, height) from the first SOF marker of JPEG ``data``; raises DecodeError."""
+    i, n = 2, len(data)
+    while i + 4 <= n:
+        if data[i] != 0xFF:
+            raise DecodeError("JPEG data has a broken marker structure")
+        marker = data[i + 1]
+        if marker == 0xFF:  # fill byte
+            i += 1
+            continue
+        if marker in (0x01, *range(0xD0, 0xD8)):
+            i += 2
+            continue
+        (length,) = struct.unpack_from(">H", data, i + 2)
+        if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
+            if i + 9 > n:
+                break
+            height, width = struct.unpack_from(">HH", data, i + 5)
+            return width, height
+        if marker in (0xD9, 0xDA) or length < 2:
+            break
+        i += 2 + length
+    raise DecodeError("JPEG data has no frame header (SOF)")
+
+
+def image_size(msg) -> tuple[int, int]:
+    """(width, height) pixels an image message declares, read from its header without decoding."""
+    if not hasattr(msg, "format"):
+        return int(msg.width), int(msg.height)
+    data = msg.data
+    try:
+        if data[:8] == PNG_SIGNATURE:
+            if len(data) < 24 or data[12:16] != b"IHDR":
+                raise DecodeError("PNG data has no IHDR header")
+            return struct.unpack_from(">II", data, 16)
+        if data[:2] == JPEG_SOI:
+            return _jpeg_size(data)
+        raise DecodeError("neither PNG nor JPEG by its signature")
+    except (DecodeError, struct.error) as e:
+        raise DecodeError(f"cannot decode {msg.format or 'compressed'} image bytes ({len(data)} bytes): {e}") from None
+
+
+class _CapturedStderr:
+    """Redirects file descriptor 2 into a temporary file while codecs run (one thread at a time)."""
+
+    _lock = threading.Lock()
+    _file = None
+
+    def __enter__(self) -> "_CapturedStderr":
+        self._lock.acquire()
+        if _CapturedStderr._file is None:
+            _CapturedStderr._file = tempfile.TemporaryFile()
+            atexit.register(_CapturedStderr._file.close)
+        self._file.seek(0)
+        self._file.truncate()
+        self._saved = os.dup(2)
+        os.dup2(self._file.fileno(), 2)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        os.dup2(self._saved, 2)
+        os.close(self._saved)
+        self._file.seek(0)
+        self.text = self._file.read(2000).decode("utf-8", "replace").strip()
+        self._lock.release()
 
 
 def to_stamp(t_ns: int) -> Timestamp:
@@ -38,13 +125,32 @@ def image_encoding(msg) -> str:
     return msg.format if hasattr(msg, "format") else msg.encoding
 
 
-def decode_image(msg) -> np.ndarray:
-    """(H, W) uint8 grey image of a CompressedImage or RawImage; raises ``DecodeError``."""
+def decode_image(msg, expected_size: tuple[int, int] | None = None) -> np.ndarray:
+    """(H, W) uint8 grey image of a CompressedImage or RawImage; raises ``DecodeError``.
+
+    The header's size is checked first, against the limits and ``expected_size``
+    (width, height) if given, so a refused image is never allocated.
+    """
+    width, height = image_size(msg)
+    problem = size_problem(width, height)
+    if problem:
+        raise DecodeError(f"image header: {problem}")
+    if expected_size is not None and (width, height) != tuple(expected_size):
+        raise DecodeError(f"image size {width}x{height} differs from the calibration's "
+                          f"{expected_size[0]}x{expected_size[1]}")
     if hasattr(msg, "format"):
         buffer = np.frombuffer(msg.data, np.uint8)
-        image = cv2.imdecode(buffer, cv2.IMREAD_UNCHANGED) if buffer.size else None
+        with _CapturedStderr() as captured:
+            try:
+                image = cv2.imdecode(buffer, cv2.IMREAD_UNCHANGED)
+            except cv2.error:
+                image = None
         if image is None:
-            raise DecodeError(f"cannot decode {msg.format or 'compressed'} image bytes ({len(msg.data)} bytes)")
+            said = " ".join(captured.text.split())[:200]
+            raise DecodeError(f"cannot decode {msg.format or 'compressed'} image bytes ({len(msg.data)} bytes)"
+                              + (f": {said}" if said else ""))
+        if image.shape[1] != width or image.shape[0] != height:
+            raise DecodeError(f"decoded image is {image.shape[1]}x{image.shape[0]}, its header said {width}x{height}")
     else:
         if msg.encoding not in RAW_ENCODINGS:
             raise DecodeError(f"raw image encoding {msg.encoding!r} is not supported "
@@ -69,9 +175,14 @@ def decode_image(msg) -> np.ndarray:
 
 
 def calibration_from_msg(msg) -> CameraCalibration:
-    """``CameraCalibration`` of a foxglove.CameraCalibration; raises ValueError if malformed."""
+    """``CameraCalibration`` of a foxglove.CameraCalibration; raises ValueError if malformed.
+
+    Only the shapes are checked here; ``calibration.check_calibration`` checks the values.
+    """
     if len(msg.K) != 9 or len(msg.P) != 12:
         raise ValueError(f"expected K with 9 and P with 12 values, found {len(msg.K)} and {len(msg.P)}")
+    if len(msg.R) not in (0, 9):
+        raise ValueError(f"expected R with 9 values, found {len(msg.R)}")
     R = np.array(msg.R, float).reshape(3, 3) if len(msg.R) == 9 else np.eye(3)
     return CameraCalibration(
         width=int(msg.width), height=int(msg.height), K=np.array(msg.K, float).reshape(3, 3),

@@ -1,44 +1,89 @@
 """Streaming reader of stereo recordings (formats.md section 1).
 
-``Recording(path)`` validates the whole file up front (MCAP magic, footer,
-topics, calibration, a transform path to the object frame) and raises
-``RecordingError`` with one line naming the file and the problem. It indexes
-the small messages (calibrations, transforms) in a first pass; ``frames()``
-then streams the images, pairs left and right by their timestamp field within
-the tolerance, and yields one ``StereoFrame`` at a time, so memory does not grow
-with the recording's length. A problem confined to one frame (undecodable
-bytes, an image without a partner, no pose at that time) is logged as a
-warning naming the frame, and the other frames go on.
+``Recording(path)`` reads the MCAP file front to back with its own record
+parser (never trusting a declared length beyond what the file or the chunk
+holds) and raises ``RecordingError`` with one line naming the file and the
+problem when the whole recording cannot be used. A first pass indexes the small
+messages (calibrations, transforms) and pairs the image timestamps;
+``frames()`` then streams the images again, pairs left and right by their
+timestamp field within the tolerance, and yields one ``StereoFrame`` at a time,
+so memory does not grow with the recording's length (one chunk is held at a
+time). A problem confined to one frame (undecodable bytes, a size that is not
+the calibration's, an image without a partner, no pose at that time) is a
+warning naming the frame, and the other frames go on; repeated warnings of one
+kind are summarised (``logs.LimitedWarnings``).
+
+Damage the reader survives, each with one warning:
+- a chunk whose CRC does not match, whose compressed data is corrupt or whose
+  declared size is a lie or beyond ``MAX_CHUNK_BYTES``: its messages are
+  skipped and the chunks after it are read;
+- a truncated file (no footer, e.g. a recorder that was killed) or a record
+  whose declared length runs past the end of the file: everything before it is
+  read and the warning says how many bytes are lost and the last good time;
+- a message on an undefined channel, or whose protobuf bytes do not parse, or
+  whose timestamp is outside the int64 nanosecond range: skipped.
 
 Choices where formats.md is silent:
+- Messages are taken in file order; within a chunk, in log-time order.
+- Messages are decoded with the Foxglove protobuf classes accum ships, after
+  checking the channel's schema name (a topic carrying another type is a
+  ``RecordingError``); the recording's descriptor set is not compiled.
 - An image or transform whose timestamp field is unset (zero) uses its log time.
+- Timestamps may be negative, duplicate or out of order. Images are paired in
+  arrival order: an image pairs with a pending image of the other camera within
+  the tolerance, the first such one; an image that arrives after its partner has
+  been given up (more than the tolerance later on the other topic) is unpaired.
+  Transforms are sorted by time (see ``tf_tree``).
 - Frames earlier than the first calibration use the first calibration
   (calibrations are normally static; a warning says so once).
-- A transform on ``/tf_static`` is static whatever its count of samples.
+- A transform on ``/tf_static`` is static whatever its count of samples. A frame
+  with several parents (a cycle) is a warning; lookups take the shortest path.
+- No silent empty recording: opening fails when an image topic has no readable
+  message, and when images exist on both topics but none pair (with the
+  measured typical left/right offset and the tolerance to try).
 """
 
 from __future__ import annotations
 
+import heapq
+import io
 import logging
+import math
 import os
+import struct
+import zlib
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Iterator
+from typing import Callable, Iterator
 
+import lz4.frame
 import numpy as np
-from mcap.exceptions import McapError
-from mcap.reader import make_reader
-from mcap_protobuf.decoder import DecoderFactory
+import zstandard
+from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration as CalibrationMsg
+from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
+from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
+from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 
 from ..errors import PoseUnavailable, RecordingError
+from ..logs import LimitedWarnings
 from .calibration import CameraCalibration, StereoIntrinsics, StereoRectifier
 from .messages import DecodeError, calibration_from_msg, decode_image, image_encoding, stamp_ns
-from .tf_tree import TransformTree
+from .tf_tree import TransformTree, sample_problem
 
 log = logging.getLogger("accumcli")
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 MAX_PENDING_IMAGES = 64
+MAX_CHUNK_BYTES = 1 << 28   # uncompressed bytes of one chunk (256 MiB)
+MAX_RECORD_BYTES = MAX_CHUNK_BYTES + 4096  # bytes of one record that is read (longer ones are skipped)
+OFFSET_SAMPLES = 4096       # left/right offsets kept to measure the typical one
+
+IMAGE_TYPES = {"foxglove.CompressedImage": CompressedImage, "foxglove.RawImage": RawImage}
+CALIBRATION_TYPES = {"foxglove.CameraCalibration": CalibrationMsg}
+TF_TYPES = {"foxglove.FrameTransform": FrameTransform, "foxglove.FrameTransforms": FrameTransforms}
+
+_OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 0x02, 0x03, 0x04, 0x05, 0x06
 
 
 @dataclass(frozen=True)
@@ -74,10 +119,12 @@ class StereoFrame:
 
 @dataclass
 class RecordingInfo:
-    """What ``accum info`` shows."""
+    """What ``accum info`` shows. ``stereo_offset_ms``: the typical (median) time between a
+    left image and the nearest right one, milliseconds, None without images on both sides;
+    ``lost_bytes``: bytes of a truncated or damaged file that could not be read."""
 
     path: str
-    topics: list = field(default_factory=list)  # (topic, schema name, message count)
+    topics: list = field(default_factory=list)  # (topic, schema name, readable message count)
     stereo_frames: int = 0
     unpaired_images: int = 0
     image_size: tuple | None = None
@@ -91,6 +138,193 @@ class RecordingInfo:
     first_ns: int | None = None
     last_ns: int | None = None
     tf_frames: list = field(default_factory=list)
+    stereo_offset_ms: float | None = None
+    lost_bytes: int = 0
+
+
+# -- MCAP records ------------------------------------------------------------------------------
+class _Malformed(ValueError):
+    """A record whose fields do not fit its bytes."""
+
+
+class _Fields:
+    """Little-endian MCAP field reader over one record's bytes, bounds-checked."""
+
+    def __init__(self, data: memoryview):
+        self.data, self.pos = data, 0
+
+    def take(self, n: int) -> memoryview:
+        if n < 0 or self.pos + n > len(self.data):
+            raise _Malformed(f"a field of {n} bytes runs past the record's {len(self.data)} bytes")
+        out = self.data[self.pos:self.pos + n]
+        self.pos += n
+        return out
+
+    def int(self, size: int) -> int:
+        return int.from_bytes(self.take(size), "little")
+
+    def string(self) -> str:
+        return bytes(self.take(self.int(4))).decode("utf-8")
+
+    def rest(self) -> memoryview:
+        return self.take(len(self.data) - self.pos)
+
+
+@dataclass
+class _Channel:
+    id: int
+    schema_name: str
+    topic: str
+    message_encoding: str
+
+
+@dataclass
+class _Message:
+    channel_id: int
+    log_time: int
+    data: memoryview
+
+
+def _records(data: memoryview) -> Iterator[tuple[int, int, memoryview]]:
+    """(offset, opcode, content) of the records in ``data``; raises _Malformed."""
+    pos, n = 0, len(data)
+    while pos < n:
+        if pos + 9 > n:
+            raise _Malformed(f"a record header at byte {pos} is cut off")
+        opcode = data[pos]
+        (length,) = struct.unpack_from("<Q", data, pos + 1)
+        if length > n - pos - 9:
+            raise _Malformed(f"the record at byte {pos} declares {length} bytes, {n - pos - 9} remain")
+        yield pos, opcode, data[pos + 9:pos + 9 + length]
+        pos += 9 + length
+
+
+def _decompress(compression: str, data: memoryview, size: int) -> bytes:
+    """Exactly ``size`` bytes of a chunk's records; raises ValueError naming what is wrong."""
+    if size > MAX_CHUNK_BYTES:
+        raise ValueError(f"it declares {size} uncompressed bytes (limit {MAX_CHUNK_BYTES >> 20} MiB)")
+    try:
+        if compression == "":
+            out = bytes(data)
+        elif compression == "zstd":
+            with zstandard.ZstdDecompressor().stream_reader(io.BytesIO(data)) as reader:
+                out = reader.read(size + 1)
+        elif compression == "lz4":
+            out = lz4.frame.LZ4FrameDecompressor().decompress(bytes(data), max_length=size + 1)
+        else:
+            raise ValueError(f"compression {compression!r} is not supported (expected zstd, lz4 or none)")
+    except (zstandard.ZstdError, RuntimeError, MemoryError, OverflowError) as e:
+        raise ValueError(f"{compression} data corrupt: {e}") from None
+    if len(out) != size:
+        raise ValueError(f"it holds {'more than' if len(out) > size else len(out)} of its declared {size} bytes")
+    return out
+
+
+class _McapScan:
+    """One front-to-back pass over an MCAP file: schemas and channels as they come, messages.
+
+    ``messages()`` yields ``_Message`` records; damage is warned about through
+    ``warn`` (chunk-level) and remembered in ``lost_bytes``, ``broken`` and
+    ``last_time_ns`` for the caller's summary.
+    """
+
+    def __init__(self, path: str, warn: Callable, channels: dict, schemas: dict):
+        self.path, self.warn = path, warn
+        self.channels, self.schemas = channels, schemas
+        self.lost_bytes, self.broken, self.footer = 0, None, False
+        self.last_time_ns: int | None = None
+
+    def _define(self, opcode: int, content: memoryview) -> None:
+        f = _Fields(content)
+        if opcode == _OP_SCHEMA:
+            schema_id, name = f.int(2), f.string()
+            self.schemas[schema_id] = name
+        else:
+            channel_id, schema_id, topic, encoding = f.int(2), f.int(2), f.string(), f.string()
+            self.channels[channel_id] = _Channel(channel_id, self.schemas.get(schema_id, ""), topic, encoding)
+
+    @staticmethod
+    def _message(content: memoryview) -> _Message:
+        f = _Fields(content)
+        channel_id = f.int(2)
+        f.int(4)
+        log_time = f.int(8)
+        f.int(8)
+        return _Message(channel_id, log_time, f.rest())
+
+    def _chunk(self, offset: int, content: memoryview) -> list[_Message]:
+        f = _Fields(content)
+        f.int(8), f.int(8)
+        size, crc, compression = f.int(8), f.int(4), f.string()
+        compressed = f.take(f.int(8))
+        try:
+            records = memoryview(_decompress(compression, compressed, size))
+        except ValueError as e:
+            self.warn("damaged chunk", "%s: chunk at byte %d damaged (%s): its messages skipped", self.path,
+                      offset, e)
+            return []
+        messages, problem = [], None
+        try:
+            for _, opcode, inner in _records(records):
+                if opcode == _OP_MESSAGE:
+                    messages.append(self._message(inner))
+                elif opcode in (_OP_SCHEMA, _OP_CHANNEL):
+                    self._define(opcode, inner)
+        except (_Malformed, UnicodeDecodeError) as e:
+            problem = f"malformed record: {e}"
+        if crc and zlib.crc32(records) != crc:
+            self.warn("damaged chunk", "%s: chunk at byte %d damaged (CRC mismatch): its %d messages skipped",
+                      self.path, offset, len(messages))
+            return []
+        if problem:
+            self.warn("damaged chunk", "%s: chunk at byte %d damaged (%s): the %d messages before it are read",
+                      self.path, offset, problem, len(messages))
+        messages.sort(key=lambda m: m.log_time)
+        return messages
+
+    def messages(self) -> Iterator[_Message]:
+        size = os.path.getsize(self.path)
+        with open(self.path, "rb") as file:
+            file.seek(len(MCAP_MAGIC))
+            pos = len(MCAP_MAGIC)
+            while True:
+                header = file.read(9)
+                if len(header) < 9:
+                    self.broken = "no footer" if len(header) == 0 else f"a record header at byte {pos} is cut off"
+                    break
+                opcode, length = header[0], struct.unpack_from("<Q", header, 1)[0]
+                if length > size - pos - 9:
+                    self.broken = f"the record at byte {pos} declares {length} bytes, {size - pos - 9} remain"
+                    break
+                if opcode == _OP_FOOTER:
+                    self.footer = True
+                    break
+                too_long = length > MAX_RECORD_BYTES
+                if too_long and opcode in (_OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK):
+                    self.warn("damaged record", "%s: record at byte %d declares %d bytes (limit %d): skipped",
+                              self.path, pos, length, MAX_RECORD_BYTES)
+                if too_long or opcode not in (_OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK):
+                    file.seek(length, os.SEEK_CUR)
+                    pos += 9 + length
+                    continue
+                content = memoryview(file.read(length))
+                try:
+                    if opcode == _OP_CHUNK:
+                        batch = self._chunk(pos, content)
+                    elif opcode == _OP_MESSAGE:
+                        batch = [self._message(content)]
+                    else:
+                        self._define(opcode, content)
+                        batch = []
+                except (_Malformed, UnicodeDecodeError) as e:
+                    self.warn("damaged record", "%s: record at byte %d damaged (%s): skipped", self.path, pos, e)
+                    batch = []
+                pos += 9 + length
+                for message in batch:
+                    self.last_time_ns = message.log_time
+                    yield message
+        if not self.footer:
+            self.lost_bytes = size - pos
 
 
 @dataclass
@@ -99,8 +333,69 @@ class _PendingImage:
     msg: object
 
 
+class _Pairing:
+    """Pairs left and right image timestamps in arrival order (see the module docstring).
+
+    ``add`` returns the pairs it completes as (left, right) ``_PendingImage``;
+    ``unpaired`` is called for each image given up. Measures the offset of each
+    pair, and of each image given up to the nearest of the last 8 on the other
+    side (``typical_offset_ns``, the median).
+    """
+
+    def __init__(self, left_topic: str, tolerance_ns: int, unpaired: Callable):
+        self.left_topic, self.tolerance_ns, self.unpaired = left_topic, tolerance_ns, unpaired
+        self.pending = {True: deque(), False: deque()}
+        self.recent = {True: deque(maxlen=8), False: deque(maxlen=8)}
+        self.offsets: list[int] = []
+
+    def _offset(self, is_left: bool, t_ns: int) -> None:
+        others = self.recent[not is_left]
+        if others and len(self.offsets) < OFFSET_SAMPLES:
+            self.offsets.append(min(abs(t_ns - o) for o in others))
+
+    def add(self, topic: str, item: _PendingImage) -> list[tuple[_PendingImage, _PendingImage]]:
+        is_left = topic == self.left_topic
+        self.recent[is_left].append(item.t_ns)
+        partners = self.pending[not is_left]
+        while partners and partners[0].t_ns < item.t_ns - self.tolerance_ns:
+            self._give_up(not is_left, partners.popleft())
+        match = next((p for p in partners if abs(p.t_ns - item.t_ns) <= self.tolerance_ns), None)
+        if match is None:
+            mine = self.pending[is_left]
+            mine.append(item)
+            if len(mine) > MAX_PENDING_IMAGES:
+                self._give_up(is_left, mine.popleft())
+            return []
+        partners.remove(match)
+        if len(self.offsets) < OFFSET_SAMPLES:
+            self.offsets.append(abs(match.t_ns - item.t_ns))
+        return [(item, match) if is_left else (match, item)]
+
+    def _give_up(self, is_left: bool, item: _PendingImage) -> None:
+        self._offset(is_left, item.t_ns)
+        self.unpaired(is_left, item)
+
+    def finish(self) -> None:
+        for is_left in (True, False):
+            for item in self.pending[is_left]:
+                self._give_up(is_left, item)
+            self.pending[is_left].clear()
+
+    @property
+    def typical_offset_ns(self) -> float | None:
+        return float(np.median(self.offsets)) if self.offsets else None
+
+
 class Recording:
-    """A stereo recording opened for streaming. Use as a context manager."""
+    """A stereo recording opened for streaming. Use as a context manager.
+
+    With ``require_pose=False`` a recording without /tf or without a path to the
+    object frame opens, and its frames carry ``T_camera_object = None``.
+    After opening: ``frame_count_hint`` is the number of stereo pairs (counted
+    in the first pass, exact), ``stereo_offset_ns`` the typical left/right
+    offset (ns, or None), ``lost_bytes`` the bytes of a truncated or damaged
+    file that could not be read.
+    """
 
     def __init__(self, path, topics: Topics = Topics(), camera_frame: str = "camera_left",
                  object_frame: str = "gripper", tolerance_ns: int = 1_000_000, require_pose: bool = True):
@@ -110,24 +405,16 @@ class Recording:
         self.object_frame = object_frame
         self.tolerance_ns = int(tolerance_ns)
         self._check_file()
-        self._file = open(self.path, "rb")
-        try:
-            self._reader = make_reader(self._file)
-            self._summary = self._read_summary()
-            self._channels = {c.topic: c for c in self._summary.channels.values()}
-            self._schemas = self._summary.schemas
-            self._check_topics(require_pose)
-            self.tree = TransformTree()
-            self.calibrations: dict[str, list[tuple[int, CameraCalibration]]] = {"left": [], "right": []}
-            self._index_small_messages()
-            if require_pose:
-                self._check_pose_path()
-        except Exception:
-            self._file.close()
-            raise
+        self.tree = TransformTree()
+        self.calibrations: dict[str, list[tuple[int, CameraCalibration]]] = {"left": [], "right": []}
         self._rectifiers: dict = {}
         self._warned_early_calibration = False
-        log.info("%s: about %d stereo frames, %d calibration message(s), transform frames: %s", self.path,
+        self._index()
+        self._check_topics(require_pose)
+        self._check_calibrations()
+        if require_pose:
+            self._check_pose_path()
+        log.info("%s: %d stereo frames, %d calibration message(s), transform frames: %s", self.path,
                  self.frame_count_hint, len(self.calibrations["left"]), ", ".join(sorted(self.tree.frames)) or "none")
 
     # -- opening and validation ---------------------------------------------------------
@@ -139,85 +426,168 @@ class Recording:
             raise self._fail("no such file")
         if not os.path.isfile(self.path):
             raise self._fail("not a file")
-        size = os.path.getsize(self.path)
-        if size == 0:
+        self.size = os.path.getsize(self.path)
+        if self.size == 0:
             raise self._fail("empty file")
-        with open(self.path, "rb") as f:
-            head = f.read(len(MCAP_MAGIC))
-            f.seek(max(size - len(MCAP_MAGIC), 0))
-            tail = f.read()
+        try:
+            with open(self.path, "rb") as f:
+                head = f.read(len(MCAP_MAGIC))
+                f.seek(max(self.size - len(MCAP_MAGIC), 0))
+                self.truncated = f.read() != MCAP_MAGIC or self.size < 2 * len(MCAP_MAGIC)
+        except OSError as e:
+            raise self._fail(f"cannot be read ({e.strerror or e})") from None
         if head != MCAP_MAGIC:
             raise self._fail("not an MCAP file (wrong magic bytes)")
-        if tail != MCAP_MAGIC or size < 2 * len(MCAP_MAGIC) + 20:
-            raise self._fail("truncated MCAP file (no footer); `mcap recover` may save what it holds")
 
-    def _read_summary(self):
+    def _roles(self) -> dict[str, dict]:
+        t = self.topics
+        return {t.left_image: IMAGE_TYPES, t.right_image: IMAGE_TYPES, t.left_calibration: CALIBRATION_TYPES,
+                t.right_calibration: CALIBRATION_TYPES, t.tf: TF_TYPES, t.tf_static: TF_TYPES}
+
+    def _scan(self, warn: LimitedWarnings, wanted: set[str],
+              first: bool = False) -> Iterator[tuple[str, int, object]]:
+        """(topic, log_time_ns, decoded message) of the ``wanted`` topics, in file order.
+
+        The ``first`` pass also counts the messages per channel and keeps the channels and the scan's
+        damage report (``_first_scan``).
+        """
+        channels, schemas, roles = {}, {}, self._roles()
+        scan = _McapScan(self.path, warn, channels, schemas)
+        counts: dict[int, int] = {}
+        if first:
+            self._first_scan, self.message_counts, self._channels_seen = scan, counts, channels
+        for message in scan.messages():
+            channel = channels.get(message.channel_id)
+            if channel is None:
+                warn("undefined channel", "%s: message at %.3f s on undefined channel id %d: skipped", self.path,
+                     message.log_time * 1e-9, message.channel_id)
+                continue
+            counts[channel.id] = counts.get(channel.id, 0) + 1
+            if channel.topic not in wanted:
+                continue
+            types = roles[channel.topic]
+            if channel.schema_name not in types or channel.message_encoding != "protobuf":
+                expected = " or ".join(types)
+                raise self._fail(f"topic {channel.topic} carries {channel.schema_name or 'no schema'} "
+                                 f"({channel.message_encoding or 'no'} encoding), expected protobuf {expected}")
+            try:
+                decoded = types[channel.schema_name].FromString(bytes(message.data))
+            except Exception as e:  # protobuf raises its own DecodeError types
+                warn("undecodable message", "%s: message on %s at %.3f s cannot be decoded (%s): skipped",
+                     self.path, channel.topic, message.log_time * 1e-9, e)
+                continue
+            yield channel.topic, message.log_time, decoded
+
+    def _stamp(self, msg, log_time: int, warn: LimitedWarnings, topic: str) -> int | None:
+        if not msg.HasField("timestamp"):
+            return log_time
         try:
-            summary = self._reader.get_summary()
-        except (McapError, ValueError, EOFError, OSError, KeyError) as e:
-            raise self._fail(f"corrupt MCAP summary ({e})") from None
-        if summary is None or not summary.channels:
-            raise self._fail("the MCAP file has no summary or no channels (was it finished?)")
-        return summary
+            return stamp_ns(msg.timestamp)
+        except ValueError as e:
+            warn("bad timestamp", "%s: message on %s at log time %.3f s: %s: skipped", self.path, topic,
+                 log_time * 1e-9, e)
+            return None
+
+    def _index(self) -> None:
+        """First pass: calibrations and transforms, image pairing on timestamps, message counts."""
+        t = self.topics
+        sides = {t.left_calibration: "left", t.right_calibration: "right"}
+        self.frame_count_hint, unpaired = 0, {"count": 0}
+
+        def count_unpaired(is_left, item):
+            unpaired["count"] += 1
+
+        pairing = _Pairing(t.left_image, self.tolerance_ns, count_unpaired)
+        wanted = set(self._roles())
+        with LimitedWarnings(log, prefix=f"{self.path}: ") as warn:
+            for topic, log_time, msg in self._scan(warn, wanted, first=True):
+                if topic in (t.left_image, t.right_image):
+                    t_ns = self._stamp(msg, log_time, warn, topic)
+                    if t_ns is not None:
+                        self.frame_count_hint += len(pairing.add(topic, _PendingImage(t_ns, None)))
+                    continue
+                if topic in sides:
+                    try:
+                        cal = calibration_from_msg(msg)
+                    except ValueError as e:
+                        warn("bad calibration", "%s: calibration on %s at %.3f s is malformed (%s): skipped",
+                             self.path, topic, log_time * 1e-9, e)
+                        continue
+                    stamp = self._stamp(msg, log_time, warn, topic)
+                    if stamp is not None:
+                        self.calibrations[sides[topic]].append((stamp, cal))
+                    continue
+                for tf in (msg.transforms if hasattr(msg, "transforms") else [msg]):
+                    t_ns = self._stamp(tf, log_time, warn, topic)
+                    if t_ns is None:
+                        continue
+                    if tf.parent_frame_id == tf.child_frame_id:
+                        warn("self transform", "%s: transform from %r to itself at %.3f s: skipped", self.path,
+                             tf.parent_frame_id, t_ns * 1e-9)
+                        continue
+                    r, q = tf.translation, tf.rotation
+                    translation, quat = (r.x, r.y, r.z), (q.x, q.y, q.z, q.w)
+                    problem = sample_problem(translation, quat)
+                    if problem:
+                        warn("invalid transform", "%s: transform %s -> %s at %.3f s has an %s: frames that "
+                             "need it have no pose", self.path, tf.parent_frame_id, tf.child_frame_id,
+                             t_ns * 1e-9, problem)
+                    self.tree.add(tf.parent_frame_id, tf.child_frame_id, t_ns, translation, quat,
+                                  static=topic == t.tf_static)
+            pairing.finish()
+            for child, parents in self.tree.ambiguous_frames().items():
+                warn("several parents", "%s: frame %r has several parents (%s) in the transform tree: lookups "
+                     "take the shortest path", self.path, child, ", ".join(map(repr, parents)))
+        scan = self._first_scan
+        self.lost_bytes = scan.lost_bytes
+        self.unpaired_count = unpaired["count"]
+        self.stereo_offset_ns = pairing.typical_offset_ns
+        self._channels = {c.topic: c for c in self._channels_seen.values()}
+        if not self._channels:
+            how = "truncated" if self.truncated else "corrupt"
+            raise self._fail(f"{how} MCAP file: no readable channel in its {self.size} bytes"
+                             + (f" ({scan.broken})" if scan.broken else ""))
+        if not scan.footer:
+            last = f"{scan.last_time_ns * 1e-9:.3f} s" if scan.last_time_ns is not None else "none"
+            what = "truncated recording (no MCAP footer)" if self.truncated else f"damaged recording ({scan.broken})"
+            log.warning("%s: %s: read up to byte %d of %d, %d bytes lost; last message read at %s", self.path,
+                        what, self.size - scan.lost_bytes, self.size, scan.lost_bytes, last)
+
+    def _lost(self) -> str:
+        return f" (the file is truncated or damaged: {self.lost_bytes} of its {self.size} bytes unreadable)" \
+            if self.lost_bytes else ""
 
     def _check_topics(self, require_pose: bool) -> None:
         t = self.topics
         available = ", ".join(sorted(self._channels)) or "none"
-        required = [t.left_image, t.right_image, t.left_calibration, t.right_calibration]
-        for topic in required:
+        for topic in (t.left_image, t.right_image, t.left_calibration, t.right_calibration):
             if topic not in self._channels:
-                raise self._fail(f"missing topic {topic} (topics found: {available})")
+                raise self._fail(f"missing topic {topic} (topics found: {available}){self._lost()}")
+        for topic, types in self._roles().items():
+            channel = self._channels.get(topic)
+            if channel is not None and channel.schema_name not in types:
+                raise self._fail(f"topic {topic} carries {channel.schema_name or 'no schema'}, expected "
+                                 f"{' or '.join(types)}")
         if require_pose and t.tf not in self._channels and t.tf_static not in self._channels:
             raise self._fail(f"missing topic {t.tf}: no transforms, so no pose of {self.object_frame!r} "
                              f"(topics found: {available})")
+        for topic in (t.left_image, t.right_image):
+            if not self.message_counts.get(self._channels[topic].id, 0):
+                raise self._fail(f"no readable image on {topic}{self._lost()}")
+        if self.frame_count_hint == 0:
+            if self.stereo_offset_ns is None:
+                raise self._fail("no stereo pair: the images of one camera cannot be read (see the warnings)")
+            offset_ms = self.stereo_offset_ns * 1e-6
+            raise self._fail(f"no stereo pair within {self.tolerance_ns * 1e-6:.1f} ms: left and right images are "
+                             f"{offset_ms:.1f} ms apart; try --tolerance-ms {math.floor(offset_ms) + 1}")
 
-    def _messages(self, topics: list[str]) -> Iterator[tuple[str, int, object]]:
-        """(topic, log_time_ns, decoded message) in log-time order; undecodable messages are warned about."""
-        decoders = {}
-        factory = DecoderFactory()
-        try:
-            for schema, channel, message in self._reader.iter_messages(topics=topics, log_time_order=True):
-                if channel.id not in decoders:
-                    decoders[channel.id] = factory.decoder_for(channel.message_encoding, schema)
-                    if decoders[channel.id] is None:
-                        raise self._fail(f"topic {channel.topic}: cannot decode {channel.message_encoding!r} "
-                                         f"messages with schema {schema.name if schema else None!r} "
-                                         "(expected protobuf Foxglove schemas)")
-                try:
-                    decoded = decoders[channel.id](message.data)
-                except Exception as e:  # protobuf raises its own DecodeError types
-                    log.warning("%s: message on %s at %.3f s cannot be decoded (%s): skipped",
-                                self.path, channel.topic, message.log_time * 1e-9, e)
-                    continue
-                yield channel.topic, message.log_time, decoded
-        except McapError as e:
-            raise self._fail(f"corrupt or truncated MCAP data ({e})") from None
-        except (EOFError, ValueError) as e:
-            raise self._fail(f"corrupt or truncated MCAP data ({type(e).__name__}: {e})") from None
-
-    def _index_small_messages(self) -> None:
+    def _check_calibrations(self) -> None:
         t = self.topics
-        sides = {t.left_calibration: "left", t.right_calibration: "right"}
-        topics = [name for name in (*sides, t.tf, t.tf_static) if name in self._channels]
-        for topic, log_time, msg in self._messages(topics):
-            if topic in sides:
-                try:
-                    cal = calibration_from_msg(msg)
-                except ValueError as e:
-                    log.warning("%s: calibration on %s at %.3f s is malformed (%s): skipped",
-                                self.path, topic, log_time * 1e-9, e)
-                    continue
-                self.calibrations[sides[topic]].append((stamp_ns(msg.timestamp), cal))
-                continue
-            for tf in (msg.transforms if hasattr(msg, "transforms") else [msg]):
-                t_ns = stamp_ns(tf.timestamp) if tf.HasField("timestamp") else log_time
-                r, q = tf.translation, tf.rotation
-                self.tree.add(tf.parent_frame_id, tf.child_frame_id, t_ns, (r.x, r.y, r.z), (q.x, q.y, q.z, q.w),
-                              static=topic == t.tf_static)
         for side, topic in (("left", t.left_calibration), ("right", t.right_calibration)):
             if not self.calibrations[side]:
-                raise self._fail(f"missing calibration: no valid message on {topic}")
+                raise self._fail(f"missing calibration: no valid message on {topic}{self._lost()}")
             self.calibrations[side].sort(key=lambda item: item[0])
+        self.calibration_at(self.calibrations["left"][0][0])
 
     def _check_pose_path(self) -> None:
         if self.tree.path(self.camera_frame, self.object_frame) is None:
@@ -226,50 +596,27 @@ class Recording:
                              f"(frames in the transform tree: {frames})")
 
     # -- streaming ----------------------------------------------------------------------
-    @property
-    def frame_count_hint(self) -> int:
-        """Number of stereo frames, from the message counts (exact unless images are unpaired)."""
-        stats = self._summary.statistics
-        counts = stats.channel_message_counts if stats else {}
-        return min(counts.get(self._channels[self.topics.left_image].id, 0),
-                   counts.get(self._channels[self.topics.right_image].id, 0))
-
-    def _pairs(self, warn: bool = True, counter: dict | None = None) -> Iterator[tuple[int, int, object, object]]:
-        """(index, t_ns, left message, right message) for each stereo pair, in time order.
-
-        Images on one topic are assumed to arrive in timestamp order; an image
-        whose partner can no longer arrive is reported as unpaired.
-        """
+    def _pairs(self, warn: LimitedWarnings | None = None) -> Iterator[tuple[int, int, object, object]]:
+        """(index, t_ns, left message, right message) for each stereo pair, in arrival order."""
         t = self.topics
-        pending = {t.left_image: deque(), t.right_image: deque()}
-        other = {t.left_image: t.right_image, t.right_image: t.left_image}
+        quiet = LimitedWarnings(log, limit=0)
+
+        def unpaired(is_left: bool, item: _PendingImage) -> None:
+            if warn is not None:
+                warn("unpaired image", "%s: image on %s at %.3f s has no partner within %.3f ms: skipped",
+                     self.path, t.left_image if is_left else t.right_image, item.t_ns * 1e-9,
+                     self.tolerance_ns * 1e-6)
+
+        pairing = _Pairing(t.left_image, self.tolerance_ns, unpaired)
         index = 0
-
-        def unpaired(topic: str, item: _PendingImage) -> None:
-            if counter is not None:
-                counter["unpaired"] = counter.get("unpaired", 0) + 1
-            if warn:
-                log.warning("%s: image on %s at %.3f s has no partner within %.3f ms: skipped",
-                            self.path, topic, item.t_ns * 1e-9, self.tolerance_ns * 1e-6)
-
-        for topic, log_time, msg in self._messages([t.left_image, t.right_image]):
-            item = _PendingImage(stamp_ns(msg.timestamp) if msg.HasField("timestamp") else log_time, msg)
-            partners = pending[other[topic]]
-            while partners and partners[0].t_ns < item.t_ns - self.tolerance_ns:
-                unpaired(other[topic], partners.popleft())
-            match = next((p for p in partners if abs(p.t_ns - item.t_ns) <= self.tolerance_ns), None)
-            if match is None:
-                pending[topic].append(item)
-                if len(pending[topic]) > MAX_PENDING_IMAGES:
-                    unpaired(topic, pending[topic].popleft())
+        for topic, log_time, msg in self._scan(quiet, {t.left_image, t.right_image}):
+            t_ns = self._stamp(msg, log_time, quiet, topic)
+            if t_ns is None:
                 continue
-            partners.remove(match)
-            left, right = (item, match) if topic == t.left_image else (match, item)
-            yield index, left.t_ns, left.msg, right.msg
-            index += 1
-        for topic, items in pending.items():
-            for item in items:
-                unpaired(topic, item)
+            for left, right in pairing.add(topic, _PendingImage(t_ns, msg)):
+                yield index, left.t_ns, left.msg, right.msg
+                index += 1
+        pairing.finish()
 
     def calibration_at(self, t_ns: int) -> StereoRectifier:
         """The rectifier of the latest calibrations at or before ``t_ns``."""
@@ -298,44 +645,39 @@ class Recording:
 
     def frames(self, start: int = 0, stop: int | None = None) -> Iterator[StereoFrame]:
         """Stream the stereo frames with index in [start, stop)."""
-        for index, t_ns, left_msg, right_msg in self._pairs():
-            if index < start:
-                continue
-            if stop is not None and index >= stop:
-                break
-            where = f"{self.path}: frame {index} ({t_ns * 1e-9:.3f} s)"
-            try:
-                left, right = decode_image(left_msg), decode_image(right_msg)
-            except DecodeError as e:
-                log.warning("%s: %s: skipped", where, e)
-                continue
-            rectifier = self.calibration_at(t_ns)
-            size = (rectifier.intrinsics.width, rectifier.intrinsics.height)
-            if left.shape[::-1] != size or right.shape[::-1] != size:
-                log.warning("%s: image sizes %s and %s differ from the calibration's %dx%d: skipped", where,
-                            "x".join(map(str, left.shape[::-1])), "x".join(map(str, right.shape[::-1])), *size)
-                continue
-            left, right = rectifier.rectify(left, right)
-            try:
-                T, problem = self.pose_at(t_ns), None
-            except PoseUnavailable as e:
-                T, problem = None, str(e)
-            yield StereoFrame(index, t_ns, left, right, rectifier.intrinsics, T, problem)
+        with LimitedWarnings(log, prefix=f"{self.path}: ") as warn:
+            for index, t_ns, left_msg, right_msg in self._pairs(warn):
+                if index < start:
+                    continue
+                if stop is not None and index >= stop:
+                    break
+                where = f"{self.path}: frame {index} ({t_ns * 1e-9:.3f} s)"
+                rectifier = self.calibration_at(t_ns)
+                size = (rectifier.intrinsics.width, rectifier.intrinsics.height)
+                try:
+                    left, right = decode_image(left_msg, size), decode_image(right_msg, size)
+                except DecodeError as e:
+                    warn("undecodable frame", "%s: %s: skipped", where, e)
+                    continue
+                left, right = rectifier.rectify(left, right)
+                try:
+                    T, problem = self.pose_at(t_ns), None
+                except PoseUnavailable as e:
+                    T, problem = None, str(e)
+                yield StereoFrame(index, t_ns, left, right, rectifier.intrinsics, T, problem)
 
     # -- summary --------------------------------------------------------------------------
     def info(self) -> RecordingInfo:
         """Scan the recording (no pixel decoding) for ``accum info``."""
-        stats = self._summary.statistics
-        counts = stats.channel_message_counts if stats else {}
-        info = RecordingInfo(path=self.path)
-        for channel in sorted(self._summary.channels.values(), key=lambda c: c.topic):
-            schema = self._schemas.get(channel.schema_id)
-            info.topics.append((channel.topic, schema.name if schema else "", counts.get(channel.id)))
+        info = RecordingInfo(path=self.path, stereo_offset_ms=None if self.stereo_offset_ns is None
+                             else self.stereo_offset_ns * 1e-6, lost_bytes=self.lost_bytes)
+        for channel in sorted(self._channels.values(), key=lambda c: c.topic):
+            info.topics.append((channel.topic, channel.schema_name, self.message_counts.get(channel.id, 0)))
         info.tf_frames = sorted(self.tree.frames)
         info.calibrations = len(self.calibrations["left"])
-        counter: dict = {}
+        info.unpaired_images = self.unpaired_count
         problems: dict[str, int] = {}
-        for _, t_ns, left_msg, _ in self._pairs(warn=False, counter=counter):
+        for _, t_ns, left_msg, _ in self._pairs():
             info.stereo_frames += 1
             info.first_ns = t_ns if info.first_ns is None else info.first_ns
             info.last_ns = t_ns
@@ -352,12 +694,11 @@ class Recording:
             except PoseUnavailable as e:
                 reason = str(e).split(": time")[0] if ": time" in str(e) else str(e)
                 problems[reason] = problems.get(reason, 0) + 1
-        info.unpaired_images = counter.get("unpaired", 0)
         info.pose_problems = sorted(problems.items())
         return info
 
     def close(self) -> None:
-        self._file.close()
+        """Nothing to release: each pass opens and closes the file itself."""
 
     def __enter__(self) -> "Recording":
         return self

@@ -6,6 +6,19 @@ all times. A lookup composes the edges on the path between two frames, each
 interpolated at the query time (linear translation, slerp rotation). A query
 outside an edge's sample range by more than the tolerance is refused with the
 reason, never extrapolated.
+
+Defined behaviour for odd input:
+- Samples may arrive in any order; they are sorted by time. Of several samples
+  of one pair at the same time the last one received is kept.
+- A sample whose quaternion is not finite or zero, or whose translation is not
+  finite or farther than ``MAX_TRANSLATION_M``, is invalid (``sample_problem``
+  says why): it is kept, so that a lookup needing it fails with
+  ``PoseUnavailable`` instead of silently bridging it. Quaternions are
+  normalised without overflow (any finite non-zero size is fine).
+- Times are integer nanoseconds anywhere in the int64 range (negative too).
+- A cycle, or a frame with two parents, is not an error: ``path`` takes the
+  shortest chain of edges (the first found on ties); ``ambiguous_frames`` names
+  the frames with more than one parent so the reader can warn.
 """
 
 from __future__ import annotations
@@ -18,14 +31,48 @@ import numpy as np
 from ..errors import PoseUnavailable
 from ..geometry import interpolate, invert, transform_from_quat
 
+MAX_TRANSLATION_M = 1e4
+
+
+def sample_problem(translation, quat_xyzw) -> str | None:
+    """Why a transform sample (translation metres, quaternion xyzw) is invalid, or None."""
+    t = np.asarray(translation, float)
+    q = np.asarray(quat_xyzw, float)
+    if not np.isfinite(q).all():
+        return "invalid quaternion (not finite)"
+    if not q.any():
+        return "invalid quaternion (zero)"
+    if not np.isfinite(t).all():
+        return "invalid translation (not finite)"
+    if np.abs(t).max() > MAX_TRANSLATION_M:
+        return f"invalid translation (beyond {MAX_TRANSLATION_M:g} m)"
+    return None
+
+
+def normalised_quats(q: np.ndarray) -> np.ndarray:
+    """(N, 4) unit quaternions of finite non-zero ``q: (N, 4)``; others as given.
+
+    ``q / |q|`` where the norm is a normal float; rows whose norm overflows or
+    underflows are scaled by their largest part first.
+    """
+    with np.errstate(invalid="ignore", over="ignore", under="ignore"):
+        scale = np.abs(q).max(axis=1, keepdims=True)
+        ok = np.isfinite(scale) & (scale > 0)
+        norm = np.linalg.norm(q, axis=1, keepdims=True)
+        plain = np.isfinite(norm) & (norm >= np.finfo(float).tiny)
+        scaled = q / np.where(ok, scale, 1.0)
+        scaled = scaled / np.where(ok, np.linalg.norm(scaled, axis=1, keepdims=True), 1.0)
+        return np.where(plain, q / np.where(plain, norm, 1.0), np.where(ok, scaled, q))
+
 
 @dataclass
-class EdgeSamples:
+class TransformSamples:
     """Samples of ``T_parent_child`` over time.
 
-    times_ns: (N,) int64; translations: (N, 3) metres; quats_xyzw: (N, 4);
-    valid: (N,) bool, False for a NaN or zero quaternion (kept so that a
-    lookup that needs it fails loudly instead of silently bridging it).
+    times_ns: (N,) int64, increasing; translations: (N, 3) metres; quats_xyzw:
+    (N, 4), unit where valid; valid: (N,) bool, False where ``sample_problem``
+    finds one (kept so that a lookup that needs it fails loudly instead of
+    silently bridging it).
     """
 
     parent: str
@@ -41,10 +88,12 @@ class EdgeSamples:
         if self.static:
             i = int(np.flatnonzero(self.valid)[-1]) if self.valid.any() else -1
             if i < 0:
-                raise PoseUnavailable(f"{self.parent} -> {self.child}: the static transform has an invalid quaternion")
+                raise PoseUnavailable(f"{self.parent} -> {self.child}: the static transform has an "
+                                      f"{self._problem(-1)}")
             return self._transform(i)
         t = self.times_ns
-        if t_ns < t[0] - tolerance_ns or t_ns > t[-1] + tolerance_ns:
+        t_ns = int(t_ns)
+        if t_ns < int(t[0]) - tolerance_ns or t_ns > int(t[-1]) + tolerance_ns:
             raise PoseUnavailable(
                 f"{self.parent} -> {self.child}: time {t_ns * 1e-9:.3f} s is outside the transform samples "
                 f"[{t[0] * 1e-9:.3f}, {t[-1] * 1e-9:.3f}] s")
@@ -55,12 +104,15 @@ class EdgeSamples:
             lo, hi = max(hi - 1, 0), min(hi, len(t) - 1)
         for i in {lo, hi}:
             if not self.valid[i]:
-                raise PoseUnavailable(
-                    f"{self.parent} -> {self.child}: the sample at {t[i] * 1e-9:.3f} s has an invalid quaternion")
+                raise PoseUnavailable(f"{self.parent} -> {self.child}: the sample at {t[i] * 1e-9:.3f} s has an "
+                                      f"{self._problem(i)}")
         if lo == hi:
             return self._transform(lo)
         s = (int(t_ns) - int(t[lo])) / (int(t[hi]) - int(t[lo]))
         return interpolate(self._transform(lo), self._transform(hi), float(s))
+
+    def _problem(self, i: int) -> str:
+        return sample_problem(self.translations[i], self.quats_xyzw[i]) or "invalid sample"
 
     def _transform(self, i: int) -> np.ndarray:
         return transform_from_quat(self.translations[i], self.quats_xyzw[i])
@@ -75,22 +127,21 @@ class TransformTree:
     edges: dict = field(default_factory=dict)
 
     def add(self, parent: str, child: str, t_ns: int, translation, quat_xyzw, static: bool = False) -> None:
-        """Record one sample of ``T_parent_child`` (translation metres, quaternion xyzw)."""
+        """Record one sample of ``T_parent_child`` (translation metres, quaternion xyzw, time int ns)."""
         self._raw[(parent, child)].append((int(t_ns), *translation, *quat_xyzw))
         if static:
             self._static_pairs.add((parent, child))
         self.edges.pop((parent, child), None)
 
-    def _edge(self, key) -> EdgeSamples:
+    def _edge(self, key) -> TransformSamples:
         if key not in self.edges:
-            samples = sorted(self._raw[key], key=lambda r: r[0])
+            latest = {r[0]: r for r in self._raw[key]}  # the last sample received at each time
+            samples = [latest[t] for t in sorted(latest)]
             times = np.array([r[0] for r in samples], np.int64)
             rows = np.array([r[1:] for r in samples], dtype=float).reshape(-1, 7)
-            q = rows[:, 3:7]
-            norm = np.linalg.norm(q, axis=1)
-            valid = np.isfinite(rows).all(axis=1) & (norm > 1e-9)
-            q = np.where(valid[:, None], q / np.where(valid, norm, 1.0)[:, None], q)
-            self.edges[key] = EdgeSamples(
+            valid = np.array([sample_problem(r[:3], r[3:]) is None for r in rows], bool)
+            q = normalised_quats(rows[:, 3:7])
+            self.edges[key] = TransformSamples(
                 parent=key[0], child=key[1], times_ns=times, translations=rows[:, :3], quats_xyzw=q, valid=valid,
                 static=key in self._static_pairs or len(rows) == 1)
         return self.edges[key]
@@ -98,6 +149,13 @@ class TransformTree:
     @property
     def frames(self) -> set[str]:
         return {f for key in self._raw for f in key}
+
+    def ambiguous_frames(self) -> dict[str, list[str]]:
+        """Frames with more than one parent: {child: sorted parents}."""
+        parents = defaultdict(set)
+        for parent, child in self._raw:
+            parents[child].add(parent)
+        return {c: sorted(p) for c, p in sorted(parents.items()) if len(p) > 1}
 
     def path(self, target: str, source: str) -> list[tuple[tuple[str, str], bool]] | None:
         """Edges from ``target`` to ``source`` as ((parent, child), forward) or None if unconnected.
