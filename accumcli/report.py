@@ -10,9 +10,12 @@ def info_lines(summary, object_frame: str, camera_frame: str) -> list[str]:
     """``accum info``'s summary of a ``RecordingInfo``."""
     intr = summary.intrinsics
     seconds = ((summary.last_ns or 0) - (summary.first_ns or 0)) * 1e-9
+    offset = f", left/right {summary.stereo_offset_ms:.3f} ms apart" if summary.stereo_offset_ms is not None else ""
     lines = [f"recording    {summary.path}",
              f"frames       {summary.stereo_frames} stereo frames over {seconds:.3f} s, "
-             f"{summary.unpaired_images} unpaired images"]
+             f"{summary.unpaired_images} unpaired images{offset}"]
+    if summary.lost_bytes:
+        lines.append(f"damage       {summary.lost_bytes} bytes could not be read (truncated or damaged)")
     if intr:
         kind = "rectified" if summary.rectified_input else f"raw ({summary.distortion_model}), rectified by accum"
         lines += [f"images       {intr.width}x{intr.height} {summary.image_encoding}, {kind}",

@@ -17,6 +17,7 @@ folder. Prints the counts by class.
 from __future__ import annotations
 
 import os
+import shutil
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -36,7 +37,6 @@ import zlib  # noqa: E402
 from collections import Counter, defaultdict  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration as CalibrationMsg  # noqa: E402
 from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform  # noqa: E402
@@ -49,10 +49,8 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from accumcli.errors import AccumError  # noqa: E402
-from accumcli.extract import extract_frame  # noqa: E402
 from accumcli.geometry import make_transform, quat_from_transform  # noqa: E402
-from accumcli.pipeline import AccumulateParams, LineAccumulation  # noqa: E402
-from accumcli.recording import CameraCalibration, Recording  # noqa: E402
+from accumcli.recording import CameraCalibration  # noqa: E402
 from accumcli.recording.messages import calibration_to_msg, image_to_msg, to_stamp, transform_to_msg  # noqa: E402
 
 T0 = 1_750_000_000 * 1_000_000_000
@@ -610,15 +608,20 @@ def write_corpus(folder) -> None:
 
 # -- running ------------------------------------------------------------------------------------
 def exercise(path: str) -> None:
-    """info, then extraction and accumulation of the first frames; only AccumError may escape."""
-    with Recording(path, require_pose=False) as rec:
-        rec.info()
-        accumulation = LineAccumulation(AccumulateParams())
-        for frame in rec.frames(0, 3):
-            extraction = extract_frame(frame)
-            if frame.T_camera_object is not None:
-                accumulation.step(frame, frame.T_camera_object, extraction)
-        accumulation.model()
+    """The library runs behind ``accum info``, ``extract`` and ``accumulate`` (first 3 frames, outputs
+    into a scratch folder); only AccumError may escape."""
+    from accumcli.runs import FrameRange, accumulate_recording, describe_recording, extract_recording
+
+    out = tempfile.mkdtemp(prefix="accum-fuzz-")
+    try:
+        describe_recording(path)
+        try:
+            extract_recording(path, os.path.join(out, "f.jsonl"), frames=FrameRange(0, 3))
+        finally:
+            accumulate_recording(path, [os.path.join(out, "m.json"), os.path.join(out, "m.ply")],
+                                 frames=FrameRange(0, 3))
+    finally:
+        shutil.rmtree(out, ignore_errors=True)
 
 
 def _child(path: str, out_fd: int) -> None:

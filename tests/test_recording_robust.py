@@ -398,17 +398,17 @@ def test_no_pair_because_one_camera_cannot_be_read(tmp_path, caplog):
 
 
 def test_a_record_longer_than_any_chunk_is_not_read(tmp_path, caplog, monkeypatch):
-    from accumcli.recording import reader
+    from accumcli.recording import mcap_records
     path = fuzz.build(tmp_path / "r.mcap", chunk_size=1)
     first = chunk_offsets(Path(path).read_bytes())[0]
-    monkeypatch.setattr(reader, "MAX_RECORD_BYTES", 100)  # the chunks (and schemas) are now "too long"
+    monkeypatch.setattr(mcap_records, "MAX_RECORD_BYTES", 100)  # the chunks (and schemas) are now "too long"
     with pytest.raises(RecordingError, match="topic /stereo/left/image carries no schema, expected"):
         Recording(path)
     assert re.search(rf"record at byte {first} declares \d+ bytes \(limit 100\): skipped", caplog.text)
 
 
 def test_unreadable_file(tmp_path, monkeypatch):
-    from accumcli.recording import reader
+    from accumcli.recording import mcap_records
     path = fuzz.build(tmp_path / "r.mcap")
 
     def denied(*args, **kwargs):

@@ -20,7 +20,9 @@ import threading
 
 import cv2
 import numpy as np
-from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration as CalibrationMsg
+from foxglove_schemas_protobuf.CameraCalibration_pb2 import (
+    CameraCalibration as CalibrationMsg,
+)
 from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage

@@ -1,9 +1,10 @@
 """Streaming reader of stereo recordings (formats.md section 1).
 
-``Recording(path)`` reads the MCAP file front to back with its own record
-parser (never trusting a declared length beyond what the file or the chunk
-holds) and raises ``RecordingError`` with one line naming the file and the
-problem when the whole recording cannot be used. A first pass indexes the small
+``Recording(path)`` reads the MCAP file front to back with accum's own record
+parser (``mcap_records``: never trusting a declared length beyond what the file
+or the chunk holds; it says why not the mcap library's reader) and raises
+``RecordingError`` with one line naming the file and the problem when the whole
+recording cannot be used. A first pass indexes the small
 messages (calibrations, transforms) and pairs the image timestamps;
 ``frames()`` then streams the images again, pairs left and right by their
 timestamp field within the tolerance, and yields one ``StereoFrame`` at a time,
@@ -15,7 +16,7 @@ kind are summarised (``logs.LimitedWarnings``).
 
 Damage the reader survives, each with one warning:
 - a chunk whose CRC does not match, whose compressed data is corrupt or whose
-  declared size is a lie or beyond ``MAX_CHUNK_BYTES``: its messages are
+  declared size is a lie or beyond ``mcap_records.MAX_CHUNK_BYTES``: its messages are
   skipped and the chunks after it are read;
 - a truncated file (no footer, e.g. a recorder that was killed) or a record
   whose declared length runs past the end of the file: everything before it is
@@ -45,21 +46,17 @@ Choices where formats.md is silent:
 
 from __future__ import annotations
 
-import heapq
-import io
 import logging
 import math
 import os
-import struct
-import zlib
 from collections import deque
 from dataclasses import dataclass, field
 from typing import Callable, Iterator
 
-import lz4.frame
 import numpy as np
-import zstandard
-from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration as CalibrationMsg
+from foxglove_schemas_protobuf.CameraCalibration_pb2 import (
+    CameraCalibration as CalibrationMsg,
+)
 from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
 from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
@@ -68,23 +65,24 @@ from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 from ..errors import PoseUnavailable, RecordingError
 from ..logs import LimitedWarnings
 from .calibration import CameraCalibration, StereoIntrinsics, StereoRectifier
-from .messages import DecodeError, calibration_from_msg, decode_image, image_encoding, stamp_ns
+from .mcap_records import MCAP_MAGIC, McapScan
+from .messages import (
+    DecodeError,
+    calibration_from_msg,
+    decode_image,
+    image_encoding,
+    stamp_ns,
+)
 from .tf_tree import TransformTree, sample_problem
 
 log = logging.getLogger("accumcli")
 
-MCAP_MAGIC = b"\x89MCAP0\r\n"
 MAX_PENDING_IMAGES = 64
-MAX_CHUNK_BYTES = 1 << 28   # uncompressed bytes of one chunk (256 MiB)
-MAX_RECORD_BYTES = MAX_CHUNK_BYTES + 4096  # bytes of one record that is read (longer ones are skipped)
 OFFSET_SAMPLES = 4096       # left/right offsets kept to measure the typical one
 
 IMAGE_TYPES = {"foxglove.CompressedImage": CompressedImage, "foxglove.RawImage": RawImage}
 CALIBRATION_TYPES = {"foxglove.CameraCalibration": CalibrationMsg}
 TF_TYPES = {"foxglove.FrameTransform": FrameTransform, "foxglove.FrameTransforms": FrameTransforms}
-
-_OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 0x02, 0x03, 0x04, 0x05, 0x06
-
 
 @dataclass(frozen=True)
 class Topics:
@@ -140,191 +138,6 @@ class RecordingInfo:
     tf_frames: list = field(default_factory=list)
     stereo_offset_ms: float | None = None
     lost_bytes: int = 0
-
-
-# -- MCAP records ------------------------------------------------------------------------------
-class _Malformed(ValueError):
-    """A record whose fields do not fit its bytes."""
-
-
-class _Fields:
-    """Little-endian MCAP field reader over one record's bytes, bounds-checked."""
-
-    def __init__(self, data: memoryview):
-        self.data, self.pos = data, 0
-
-    def take(self, n: int) -> memoryview:
-        if n < 0 or self.pos + n > len(self.data):
-            raise _Malformed(f"a field of {n} bytes runs past the record's {len(self.data)} bytes")
-        out = self.data[self.pos:self.pos + n]
-        self.pos += n
-        return out
-
-    def int(self, size: int) -> int:
-        return int.from_bytes(self.take(size), "little")
-
-    def string(self) -> str:
-        return bytes(self.take(self.int(4))).decode("utf-8")
-
-    def rest(self) -> memoryview:
-        return self.take(len(self.data) - self.pos)
-
-
-@dataclass
-class _Channel:
-    id: int
-    schema_name: str
-    topic: str
-    message_encoding: str
-
-
-@dataclass
-class _Message:
-    channel_id: int
-    log_time: int
-    data: memoryview
-
-
-def _records(data: memoryview) -> Iterator[tuple[int, int, memoryview]]:
-    """(offset, opcode, content) of the records in ``data``; raises _Malformed."""
-    pos, n = 0, len(data)
-    while pos < n:
-        if pos + 9 > n:
-            raise _Malformed(f"a record header at byte {pos} is cut off")
-        opcode = data[pos]
-        (length,) = struct.unpack_from("<Q", data, pos + 1)
-        if length > n - pos - 9:
-            raise _Malformed(f"the record at byte {pos} declares {length} bytes, {n - pos - 9} remain")
-        yield pos, opcode, data[pos + 9:pos + 9 + length]
-        pos += 9 + length
-
-
-def _decompress(compression: str, data: memoryview, size: int) -> bytes:
-    """Exactly ``size`` bytes of a chunk's records; raises ValueError naming what is wrong."""
-    if size > MAX_CHUNK_BYTES:
-        raise ValueError(f"it declares {size} uncompressed bytes (limit {MAX_CHUNK_BYTES >> 20} MiB)")
-    try:
-        if compression == "":
-            out = bytes(data)
-        elif compression == "zstd":
-            with zstandard.ZstdDecompressor().stream_reader(io.BytesIO(data)) as reader:
-                out = reader.read(size + 1)
-        elif compression == "lz4":
-            out = lz4.frame.LZ4FrameDecompressor().decompress(bytes(data), max_length=size + 1)
-        else:
-            raise ValueError(f"compression {compression!r} is not supported (expected zstd, lz4 or none)")
-    except (zstandard.ZstdError, RuntimeError, MemoryError, OverflowError) as e:
-        raise ValueError(f"{compression} data corrupt: {e}") from None
-    if len(out) != size:
-        raise ValueError(f"it holds {'more than' if len(out) > size else len(out)} of its declared {size} bytes")
-    return out
-
-
-class _McapScan:
-    """One front-to-back pass over an MCAP file: schemas and channels as they come, messages.
-
-    ``messages()`` yields ``_Message`` records; damage is warned about through
-    ``warn`` (chunk-level) and remembered in ``lost_bytes``, ``broken`` and
-    ``last_time_ns`` for the caller's summary.
-    """
-
-    def __init__(self, path: str, warn: Callable, channels: dict, schemas: dict):
-        self.path, self.warn = path, warn
-        self.channels, self.schemas = channels, schemas
-        self.lost_bytes, self.broken, self.footer = 0, None, False
-        self.last_time_ns: int | None = None
-
-    def _define(self, opcode: int, content: memoryview) -> None:
-        f = _Fields(content)
-        if opcode == _OP_SCHEMA:
-            schema_id, name = f.int(2), f.string()
-            self.schemas[schema_id] = name
-        else:
-            channel_id, schema_id, topic, encoding = f.int(2), f.int(2), f.string(), f.string()
-            self.channels[channel_id] = _Channel(channel_id, self.schemas.get(schema_id, ""), topic, encoding)
-
-    @staticmethod
-    def _message(content: memoryview) -> _Message:
-        f = _Fields(content)
-        channel_id = f.int(2)
-        f.int(4)
-        log_time = f.int(8)
-        f.int(8)
-        return _Message(channel_id, log_time, f.rest())
-
-    def _chunk(self, offset: int, content: memoryview) -> list[_Message]:
-        f = _Fields(content)
-        f.int(8), f.int(8)
-        size, crc, compression = f.int(8), f.int(4), f.string()
-        compressed = f.take(f.int(8))
-        try:
-            records = memoryview(_decompress(compression, compressed, size))
-        except ValueError as e:
-            self.warn("damaged chunk", "%s: chunk at byte %d damaged (%s): its messages skipped", self.path,
-                      offset, e)
-            return []
-        messages, problem = [], None
-        try:
-            for _, opcode, inner in _records(records):
-                if opcode == _OP_MESSAGE:
-                    messages.append(self._message(inner))
-                elif opcode in (_OP_SCHEMA, _OP_CHANNEL):
-                    self._define(opcode, inner)
-        except (_Malformed, UnicodeDecodeError) as e:
-            problem = f"malformed record: {e}"
-        if crc and zlib.crc32(records) != crc:
-            self.warn("damaged chunk", "%s: chunk at byte %d damaged (CRC mismatch): its %d messages skipped",
-                      self.path, offset, len(messages))
-            return []
-        if problem:
-            self.warn("damaged chunk", "%s: chunk at byte %d damaged (%s): the %d messages before it are read",
-                      self.path, offset, problem, len(messages))
-        messages.sort(key=lambda m: m.log_time)
-        return messages
-
-    def messages(self) -> Iterator[_Message]:
-        size = os.path.getsize(self.path)
-        with open(self.path, "rb") as file:
-            file.seek(len(MCAP_MAGIC))
-            pos = len(MCAP_MAGIC)
-            while True:
-                header = file.read(9)
-                if len(header) < 9:
-                    self.broken = "no footer" if len(header) == 0 else f"a record header at byte {pos} is cut off"
-                    break
-                opcode, length = header[0], struct.unpack_from("<Q", header, 1)[0]
-                if length > size - pos - 9:
-                    self.broken = f"the record at byte {pos} declares {length} bytes, {size - pos - 9} remain"
-                    break
-                if opcode == _OP_FOOTER:
-                    self.footer = True
-                    break
-                too_long = length > MAX_RECORD_BYTES
-                if too_long and opcode in (_OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK):
-                    self.warn("damaged record", "%s: record at byte %d declares %d bytes (limit %d): skipped",
-                              self.path, pos, length, MAX_RECORD_BYTES)
-                if too_long or opcode not in (_OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK):
-                    file.seek(length, os.SEEK_CUR)
-                    pos += 9 + length
-                    continue
-                content = memoryview(file.read(length))
-                try:
-                    if opcode == _OP_CHUNK:
-                        batch = self._chunk(pos, content)
-                    elif opcode == _OP_MESSAGE:
-                        batch = [self._message(content)]
-                    else:
-                        self._define(opcode, content)
-                        batch = []
-                except (_Malformed, UnicodeDecodeError) as e:
-                    self.warn("damaged record", "%s: record at byte %d damaged (%s): skipped", self.path, pos, e)
-                    batch = []
-                pos += 9 + length
-                for message in batch:
-                    self.last_time_ns = message.log_time
-                    yield message
-        if not self.footer:
-            self.lost_bytes = size - pos
 
 
 @dataclass
@@ -452,7 +265,7 @@ class Recording:
         damage report (``_first_scan``).
         """
         channels, schemas, roles = {}, {}, self._roles()
-        scan = _McapScan(self.path, warn, channels, schemas)
+        scan = McapScan(self.path, warn, channels, schemas)
         counts: dict[int, int] = {}
         if first:
             self._first_scan, self.message_counts, self._channels_seen = scan, counts, channels

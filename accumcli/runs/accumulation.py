@@ -10,6 +10,7 @@ from pathlib import Path
 
 from ..evaluate import EdgeSamples, score_segments
 from ..lines2d import StageTimes
+from ..logs import LimitedWarnings
 from ..model_io import read_truth, write_json_lines, write_model, write_ply
 from ..outputs import OutputSet
 from ..pipeline import AccumulateParams, LineAccumulation
@@ -83,12 +84,14 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
                 done += 1
                 progress(done, total)
                 if frame.T_camera_object is None:
-                    log.warning("%s: frame %d: no pose (%s): skipped", recording, frame.index, frame.pose_problem)
+                    no_pose.warning("no pose", "%s: frame %d: no pose (%s): skipped", recording, frame.index,
+                                    frame.pose_problem)
                     result.skipped[frame.pose_problem] = result.skipped.get(frame.pose_problem, 0) + 1
                     continue
                 yield frame
 
-        with rerun_log(files, rrd, "accumulate") as viz, scene_log(files, outputs) as scenes:
+        with rerun_log(files, rrd, "accumulate") as viz, scene_log(files, outputs) as scenes, \
+                LimitedWarnings(log) as no_pose:
             for frame, extraction in extracted_frames(frames_with_pose(), params.extract, rec.camera_frame, workers,
                                                       acc.times):
                 step = acc.step(frame, frame.T_camera_object, extraction)
