@@ -6,7 +6,6 @@ and how to extract (``extract_params``: an ``ExtractParams``). Values are parsed
 from __future__ import annotations
 
 import functools
-import os
 
 import click
 
@@ -30,7 +29,7 @@ def _parse_frames(text):
 
 
 workers_option = click.option(
-    "--workers", type=click.IntRange(min=1), default=min(2, os.cpu_count() or 1), show_default=True,
+    "--workers", type=click.IntRange(min=1), default=1, show_default=True,
     help="Worker processes (extract, accumulate: frames extracted ahead; batch: recordings at once). The "
          "output is the same whatever the number.")
 

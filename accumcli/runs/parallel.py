@@ -5,11 +5,17 @@ this process, in order) are extracted by a pool of ``workers`` processes, at mos
 ``2 * workers`` frames ahead, and handed back in recording order: memory stays bounded and the
 result is the same, byte for byte, whatever the number of workers (extraction of one frame is
 deterministic). With ``workers`` = 1 extraction runs inline, without a pool.
+
+The pool starts its processes from a fork server (``forkserver``), not by forking this process:
+a fork of a process whose OpenCV and BLAS thread pools are running can deadlock in the child. As
+with any multiprocessing, a script that calls a run with ``workers`` > 1 must guard its entry
+point (``if __name__ == "__main__":``), since the workers import the main module.
 """
 
 from __future__ import annotations
 
 import collections
+import multiprocessing
 from concurrent.futures import ProcessPoolExecutor
 from typing import Iterable, Iterator
 
@@ -38,7 +44,9 @@ def extracted_frames(frames: Iterable[StereoFrame], params: ExtractParams, camer
         for frame in frames:
             yield frame, extract_frame(frame, params, camera_frame, times)
         return
-    with ProcessPoolExecutor(workers, initializer=_one_thread) as pool:
+    methods = multiprocessing.get_all_start_methods()
+    context = multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
+    with ProcessPoolExecutor(workers, mp_context=context, initializer=_one_thread) as pool:
         pending: collections.deque = collections.deque()
         for frame in frames:
             pending.append((frame, pool.submit(_extract, frame, params, camera_frame)))
