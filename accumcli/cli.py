@@ -282,9 +282,11 @@ def extract(recording, output, rrd, with_2d, workers, frames, extract_params, op
 @click.option("--motion", type=click.Choice(["gripper", "tracked"]), default="gripper", show_default=True,
               help="gripper: the recorded poses (the paper); tracked: each refined on the images against the "
                    "current model first.")
-@click.option("--position-threshold", type=click.FloatRange(0.1, 50.0), default=3.0, show_default=True,
+@click.option("--sp", "position_threshold", type=click.FloatRange(0.1, 50.0), default=3.0, show_default=True,
+              metavar="MM",
               help="s_p of the paper's metric (association and merging), millimetres.")
-@click.option("--angle-threshold", type=click.FloatRange(0.5, 45.0), default=7.0, show_default=True,
+@click.option("--so", "angle_threshold", type=click.FloatRange(0.5, 45.0), default=7.0, show_default=True,
+              metavar="DEG",
               help="s_o of the paper's metric, degrees.")
 @workers_option
 @frames_option

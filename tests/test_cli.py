@@ -122,7 +122,7 @@ def test_frames_without_pose_are_skipped_with_a_warning(tmp_path):
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--angle-threshold", "90"], "not in the range"),
+    (["--so", "90"], "not in the range"),
     (["--detector", "canny"], "'canny' is not one of"),
     (["--depth-range", "2:1"], "expected MIN:MAX"),
     (["-o", "nowhere/m.json"], "the folder nowhere does not exist"),
