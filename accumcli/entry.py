@@ -15,4 +15,8 @@ def main() -> None:
     except KeyboardInterrupt:
         sys.stderr.write("error: interrupted\n")
         sys.exit(130)
-    cli_main()
+    try:
+        cli_main()
+    except KeyboardInterrupt:   # one that came after the command's own handling (while exiting)
+        sys.stderr.write("error: interrupted\n")
+        sys.exit(130)
