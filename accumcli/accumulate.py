@@ -59,8 +59,10 @@ class EntityType(Protocol[E]):
 
     def transform(self, entities: E, T_new_old: np.ndarray) -> E: ...
 
-    def correspondences(self, model: E, observed: E) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(model index, observed index, cost) of all pairs within the metric's thresholds."""
+    def correspondences(self, model: E, observed: E) -> tuple[np.ndarray, ...]:
+        """(model index, observed index, cost) of all pairs within the metric's thresholds, and
+        optionally (K,) each pair's widening >= 1: how many times likelier than in the nominal gate
+        something false falls into the pair's (1 if not given)."""
 
     def merge(self, model: E, observed: E, model_index: np.ndarray, observed_index: np.ndarray,
               context: Any) -> E:
@@ -83,20 +85,39 @@ def logit(p: float) -> float:
 
 @dataclass(frozen=True)
 class UpdateRule:
-    p_detect: float = 0.5      # an entity of the object that the frame should show is extracted
+    p_detect: float = 0.5      # a confirmation's likelihood: it adds log(p_detect / p_false)
+    prior_rate: float = 0.25   # prior mean of an entity's own detection rate (Beta prior) ...
+    prior_views: float = 2.0   # ... and its weight, in expected views
+    p_max: float = 0.7         # the largest rate believed: a miss never costs more than log(0.3 / 0.9)
     p_false: float = 0.1       # something is extracted there although the entity is not real
+    contradiction: float = -2.0  # log-odds of a re-observation where a static entity would be
+    history: int = 3           # frames whose observations are kept for that test
+    static_margin: float = 0.25  # ... which holds where it explains the frame better by this cost
+    widening: float = 1.0      # a confirmation in a gate w times wider counts as if p_false were w^this
     initial: float = 0.25      # confidence of a new entity
     floor: float = 0.1         # pruned below
     ceiling: float = 0.995
-    tentative_frames: int = 6  # a tentative entity unconfirmed this long is pruned
+    tentative_frames: int = 12  # a tentative entity unconfirmed this long is pruned
 
     @property
     def hit(self) -> float:
         return float(np.log(self.p_detect / self.p_false))
 
-    @property
-    def miss(self) -> float:
-        return float(np.log((1 - self.p_detect) / (1 - self.p_false)))
+    def confirmation(self, widening) -> np.ndarray:
+        """Log-odds of a confirmation within a gate ``widening`` times the nominal one: false
+        observations fall into it that much likelier (``p_false`` times ``widening``), never
+        making a confirmation count against the entity."""
+        return np.log(self.p_detect / np.minimum(self.p_false * np.asarray(widening) ** self.widening, self.p_detect))
+
+    def rate(self, hits: np.ndarray, views: np.ndarray) -> np.ndarray:
+        """(N,) the detection rate expected at an entity's next expected view: the Beta posterior mean
+        of its ``hits`` confirmations over ``views`` expected views, clipped to [p_false, p_max]."""
+        a = self.prior_rate * self.prior_views
+        return np.clip((hits + a) / (views + self.prior_views), self.p_false, self.p_max)
+
+    def miss(self, rate) -> np.ndarray:
+        """Log-odds of a miss of an entity whose detection rate is ``rate``."""
+        return np.log((1 - rate) / (1 - self.p_false))
 
 
 @dataclass
@@ -111,6 +132,7 @@ class StepStats:
     merged: int
     size: int
     accepted: int
+    contradicted: int = 0
 
 
 def one_to_one(a: np.ndarray, b: np.ndarray, cost: np.ndarray, rounds: int = 4) -> np.ndarray:
@@ -160,9 +182,13 @@ class Accumulator(Generic[E]):
         self.rule = rule
         self.entities = empty
         self.log_odds = np.zeros(0)
-        self.observations = np.zeros(0, np.int64)
+        self.observations = np.zeros(0, np.int64)    # frames that confirmed it, its first included
+        self.views = np.zeros(0, np.int64)           # frames after its first that expected or confirmed it
         self.last_confirmed = np.zeros(0, np.int64)
         self.frame = 0
+        # the last ``rule.history`` frames' observations in their sensor frame, and per observation the
+        # model entity it became or was merged into (-1: none any more)
+        self._recent: list[tuple[E, np.ndarray]] = []
 
     @property
     def confidence(self) -> np.ndarray:
@@ -177,20 +203,35 @@ class Accumulator(Generic[E]):
         (``InputError`` if it is not a rigid transform)."""
         T_model_observed = check_transform(T_model_observed, "T_model_observed")
         rule, kind = self.rule, self.entity_type
+        sensed = observed
         observed = kind.observe(kind.transform(observed, T_model_observed), context)
         n_model, n_obs = len(self), kind.size(observed)
-        all_mi, all_oi, cost = kind.correspondences(self.entities, observed)
+        all_mi, all_oi, cost, *widening = kind.correspondences(self.entities, observed)
+        object_cost = np.full(n_model, np.inf)
+        np.minimum.at(object_cost, all_mi, cost)
+        contradicted = self._static(sensed) + rule.static_margin < object_cost
+        explained = ~contradicted[all_mi]   # pairs of a contradicted entity neither confirm nor merge
+        all_mi, all_oi, cost = all_mi[explained], all_oi[explained], cost[explained]
+        widening = [w[explained] for w in widening]
         keep = one_to_one(all_mi, all_oi, cost)
         mi, oi = all_mi[keep], all_oi[keep]
         expected = kind.expected(self.entities, context) if n_model else np.zeros(0, bool)
         confirmed = np.zeros(n_model, bool)
         confirmed[all_mi] = True
-        missed = expected & ~confirmed
+        missed = expected & ~confirmed & ~contradicted
         candidates = _sharing(all_mi, all_oi)
         if len(mi):
             self.entities = kind.merge(self.entities, observed, mi, oi, context)
-        self.log_odds = np.minimum(self.log_odds + rule.hit * confirmed + rule.miss * missed, logit(rule.ceiling))
+        rate = rule.rate(self.observations - 1, self.views)
+        hit = np.full(n_model, rule.hit)
+        if widening and len(all_mi):   # the tightest gate that confirmed the entity
+            widest = np.full(n_model, np.inf)
+            np.minimum.at(widest, all_mi, widening[0])
+            hit[confirmed] = rule.confirmation(widest[confirmed])
+        change = np.where(confirmed, hit, np.where(missed, rule.miss(rate), 0.0))
+        self.log_odds = np.minimum(self.log_odds + change + rule.contradiction * contradicted, logit(rule.ceiling))
         self.observations = self.observations + confirmed
+        self.views = self.views + (confirmed | expected)
         self.last_confirmed = np.where(confirmed, self.frame, self.last_confirmed)
         n_merged = self._consolidate(*candidates)
         # pruning of the old entities, and the new ones appended, in one rebuild of the arrays
@@ -202,15 +243,45 @@ class Accumulator(Generic[E]):
         fresh = np.ones(n_obs, bool)
         fresh[oi] = False
         n_new = int(fresh.sum())
+        became = np.full(n_obs, -1, np.int64)
+        became[oi] = mi
         if n_pruned or n_merged or n_new:
             index = np.flatnonzero(alive)
+            renumber = np.full(n_model + 1, -1, np.int64)   # the last slot maps -1 to -1
+            renumber[index] = np.arange(len(index))
+            self._recent = [(o, renumber[e]) for o, e in self._recent]
+            became = renumber[became]
+            became[fresh] = len(index) + np.arange(n_new)
             self.entities = kind.concatenate(kind.select(self.entities, index), kind.select(observed, np.flatnonzero(fresh)))
             self.log_odds = np.concatenate([self.log_odds[index], np.full(n_new, logit(rule.initial))])
             self.observations = np.concatenate([self.observations[index], np.ones(n_new, np.int64)])
+            self.views = np.concatenate([self.views[index], np.zeros(n_new, np.int64)])
             self.last_confirmed = np.concatenate([self.last_confirmed[index], np.full(n_new, self.frame)])
+        if rule.history:
+            self._recent = (self._recent + [(sensed, became)])[-rule.history:]
         self.frame += 1
         return StepStats(observed=n_obs, confirmed=int(confirmed.sum()), missed=int(missed.sum()), new=n_new,
-                         pruned=n_pruned, merged=n_merged, size=len(self), accepted=int((self.log_odds >= 0).sum()))
+                         pruned=n_pruned, merged=n_merged, size=len(self), accepted=int((self.log_odds >= 0).sum()),
+                         contradicted=int(contradicted.sum()))
+
+    def _static(self, sensed: E) -> np.ndarray:
+        """(N,) the cost of the best static explanation (inf: none) of model entities that the frame re-observed where they would be if they did not move
+        with the model but stayed in the sensor's frame: an observation of a recent frame that became
+        (or confirmed) the entity corresponds, in the sensor's frame, to one of this frame."""
+        static = np.full(len(self), np.inf)
+        if not self._recent or self.entity_type.size(sensed) == 0:
+            return static
+        kind = self.entity_type
+        earlier = self._recent[0][0]
+        for o, _ in self._recent[1:]:
+            earlier = kind.concatenate(earlier, o)
+        entity = np.concatenate([e for _, e in self._recent])
+        if len(entity) == 0:
+            return static
+        i, _, cost = kind.correspondences(earlier, sensed)[:3]
+        hit = entity[i]
+        np.minimum.at(static, hit[hit >= 0], cost[hit >= 0])
+        return static
 
     def _consolidate(self, i: np.ndarray, j: np.ndarray) -> int:
         """Merge model entities (candidate pairs i, j) that the entity type deems the same:
@@ -237,6 +308,7 @@ class Accumulator(Generic[E]):
         self.entities = self.entity_type.merge(self.entities, self.entities, winner, loser, None)
         self.log_odds[winner] = np.maximum(self.log_odds[winner], self.log_odds[loser])
         self.observations[winner] += self.observations[loser]
+        self.views[winner] = np.maximum(self.views[winner], self.views[loser])
         self.last_confirmed[winner] = np.maximum(self.last_confirmed[winner], self.last_confirmed[loser])
         self.log_odds[loser] = -np.inf  # removed with the pruned ones, in one copy
         return len(loser)
