@@ -55,7 +55,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .geometry import check_points, check_transform, invert, transform_points
-from .metric import MetricThresholds, candidate_pairs, d_o, d_p
+from .metric import MetricThresholds, candidate_pairs, d_o, d_p, pair_costs
 from .recording import StereoIntrinsics
 from .segments import Segments, concatenate
 from .visibility import segments_in_both_images
@@ -120,6 +120,18 @@ class LineSegmentType:
         return candidate_pairs(model.centers, model.directions, model.lengths, observed.centers,
                                observed.directions, observed.lengths, self.params.thresholds,
                                sigmas_a=sigmas(model), sigmas_b=sigmas(observed), widening=True)
+
+    def pair_cost(self, a: Segments, b: Segments) -> np.ndarray:
+        ok, cost, _ = pair_costs(a.centers, a.directions, a.lengths, b.centers, b.directions, b.lengths,
+                                 self.params.thresholds, sigmas(a), sigmas(b))
+        return cost
+
+    def essentials(self, entities: Segments) -> Segments:
+        """Centres, directions, lengths and the two sigmas (``sigmas``) only."""
+        sig = sigmas(entities)
+        extra = {} if sig is None else {"sigma_depth_m": sig[0], "sigma_direction_rad": sig[1]}
+        return Segments(entities.frame_id, entities.centers, entities.directions, entities.lengths,
+                        entities.confidence, entities.observations, extra)
 
     def same(self, model: Segments, i: np.ndarray, j: np.ndarray):
         """Pairs of model segments within the metric's thresholds whose centres are also within

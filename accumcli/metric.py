@@ -96,7 +96,9 @@ def candidate_pairs(centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b,
         return empty
     s_p = thresholds.s_p
     gated = sigmas_a is not None and sigmas_b is not None
-    widest = s_p * (thresholds.max_scale if gated else 1.0)
+    widest = s_p
+    if gated:   # the widest gate any pair can have
+        widest = float(pair_thresholds(thresholds, np.max(sigmas_a[0]), np.max(sigmas_b[0]), s_p, thresholds.max_scale))
     longest = max(float(lengths_a.max()), float(lengths_b.max()))
     radius = float(np.hypot(widest + longest / 2, widest))
     k = min(neighbours, len(centers_a))
@@ -107,20 +109,31 @@ def candidate_pairs(centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b,
     i = np.asarray(index).reshape(len(centers_b), k)[found].astype(np.int64)
     if len(i) == 0:
         return empty
-    s_o = np.radians(thresholds.s_o_deg)
-    angle = d_o(dirs_a[i], dirs_b[j])
-    if gated:
-        s_o = pair_thresholds(thresholds, sigmas_a[1][i], sigmas_b[1][j], s_o, thresholds.max_scale_direction)
-    keep = angle <= s_o  # the cheap test first
-    i, j, angle = i[keep], j[keep], angle[keep]
-    if gated:
-        s_o = s_o[keep]
-        s_p = pair_thresholds(thresholds, sigmas_a[0][i], sigmas_b[0][j], s_p, thresholds.max_scale)
-    dist = d_p(centers_a[i], dirs_a[i], lengths_a[i], centers_b[j], dirs_b[j], lengths_b[j], s_p)
-    ok = dist <= s_p
-    if gated:
-        s_p, s_o = s_p[ok], s_o[ok]
-    pairs = i[ok], j[ok], (dist[ok] / s_p) ** 2 + (angle[ok] / s_o) ** 2
-    if not widening:
-        return pairs
-    return pairs + (np.broadcast_to(s_p / thresholds.s_p * s_o / np.radians(thresholds.s_o_deg), pairs[2].shape),)
+    ok, cost, wide = pair_costs(centers_a[i], dirs_a[i], lengths_a[i], centers_b[j], dirs_b[j], lengths_b[j],
+                                thresholds, _rows(sigmas_a, i), _rows(sigmas_b, j))
+    pairs = i[ok], j[ok], cost[ok]
+    return pairs + (wide[ok],) if widening else pairs
+
+
+def _rows(sigmas, index):
+    return None if sigmas is None else (sigmas[0][index], sigmas[1][index])
+
+
+def pair_costs(centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b, thresholds: MetricThresholds,
+               sigmas_a=None, sigmas_b=None):
+    """Row by row (K rows): (ok (K,) bool, cost (K,), widening (K,)) of the pairs (a[k], b[k]), as
+    ``candidate_pairs`` defines them (cost inf where not ok)."""
+    s_p, s_o = thresholds.s_p, np.radians(thresholds.s_o_deg)
+    angle = d_o(dirs_a, dirs_b)
+    if sigmas_a is not None and sigmas_b is not None:
+        s_o = pair_thresholds(thresholds, sigmas_a[1], sigmas_b[1], s_o, thresholds.max_scale_direction)
+        s_p = pair_thresholds(thresholds, sigmas_a[0], sigmas_b[0], s_p, thresholds.max_scale)
+    s_p, s_o = np.broadcast_to(s_p, angle.shape), np.broadcast_to(s_o, angle.shape)
+    ok = angle <= s_o  # the cheap test first
+    sel = np.flatnonzero(ok)
+    dist = np.full(len(angle), np.inf)
+    dist[sel] = d_p(centers_a[sel], dirs_a[sel], lengths_a[sel], centers_b[sel], dirs_b[sel], lengths_b[sel],
+                    s_p[sel])
+    ok &= dist <= s_p
+    cost = np.where(ok, (dist / s_p) ** 2 + (angle / s_o) ** 2, np.inf)
+    return ok, cost, s_p / thresholds.s_p * s_o / np.radians(thresholds.s_o_deg)
