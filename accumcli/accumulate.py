@@ -244,7 +244,9 @@ class Accumulator(Generic[E]):
         observed = kind.observe(kind.transform(observed, T_model_observed), context)
         n_model, n_obs = len(self), kind.size(observed)
         all_mi, all_oi, cost, *widening = kind.correspondences(self.entities, observed)
-        contradicted = self._static(observed, T_model_observed)
+        held = np.full(n_model, np.inf)
+        np.minimum.at(held, all_mi, cost)
+        contradicted = self._static(observed, T_model_observed, held)
         explained = ~contradicted[all_mi]   # pairs of a contradicted entity neither confirm nor merge
         all_mi, all_oi, cost = all_mi[explained], all_oi[explained], cost[explained]
         widening = [w[explained] for w in widening]
@@ -260,9 +262,9 @@ class Accumulator(Generic[E]):
         rate = rule.rate(self.observations - 1, self.views)
         hit = np.full(n_model, rule.hit)
         if widening and len(all_mi):   # the tightest gate that confirmed the entity
-            widest = np.full(n_model, np.inf)
-            np.minimum.at(widest, all_mi, widening[0])
-            hit[confirmed] = rule.confirmation(widest[confirmed])
+            tightest = np.full(n_model, np.inf)
+            np.minimum.at(tightest, all_mi, widening[0])
+            hit[confirmed] = rule.confirmation(tightest[confirmed])
         change = np.where(confirmed, hit, np.where(missed, rule.miss(rate), 0.0))
         self.log_odds = np.minimum(self.log_odds + change + rule.contradiction * contradicted, logit(rule.ceiling))
         self.observations = self.observations + confirmed
@@ -297,14 +299,14 @@ class Accumulator(Generic[E]):
                          pruned=n_pruned, merged=n_merged, size=len(self), accepted=int((self.log_odds >= 0).sum()),
                          contradicted=int(contradicted.sum()))
 
-    def _static(self, observed: E, T_model_observed: np.ndarray) -> np.ndarray:
+    def _static(self, observed: E, T_model_observed: np.ndarray, held: np.ndarray) -> np.ndarray:
         """(N,) bool: model entities that this frame's ``observed`` (in the model's frame) show staying
         put in the sensor's frame rather than in the model's: the best cost of an observation with
         the entity's first observation held still in the sensor's frame (``origin_sensed`` moved by
-        this frame's ``T_model_observed``) is lower by ``static_margin`` than with it held in the
-        model's (``origin``). Judged from the first observation, not the merged state, which an
-        entity drifting with a slow motion would drag along; and only where the two predictions
-        differ by more than the margin (where the object has not moved, the frame cannot tell)."""
+        this frame's ``T_model_observed``) is lower by ``static_margin`` than ``held`` (N,), the best
+        cost with the entity where the model has it (inf: none). Only where the entity's first
+        observation held still in the sensor's and in the model's frame differ by more than the
+        margin: where the object has not moved since, the frame cannot tell."""
         rule, kind = self.rule, self.entity_type
         static = np.zeros(len(self), bool)
         if rule.static_margin is None or self.origin is None or kind.size(observed) == 0 or len(self) == 0:
@@ -313,13 +315,10 @@ class Accumulator(Generic[E]):
         candidates = np.flatnonzero(~(kind.pair_cost(still, self.origin) <= rule.static_margin))
         if len(candidates) == 0:
             return static
-        costs = []
-        for hypothesis in (still, self.origin):
-            best = np.full(len(candidates), np.inf)
-            i, _, cost = kind.correspondences(kind.select(hypothesis, candidates), observed)[:3]
-            np.minimum.at(best, i, cost)
-            costs.append(best)
-        static[candidates] = costs[0] + rule.static_margin < costs[1]
+        best = np.full(len(candidates), np.inf)
+        _, j, cost = kind.correspondences(observed, kind.select(still, candidates))[:3]  # the metric is symmetric
+        np.minimum.at(best, j, cost)
+        static[candidates] = best + rule.static_margin < held[candidates]
         return static
 
     def _consolidate(self, i: np.ndarray, j: np.ndarray) -> int:
