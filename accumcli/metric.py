@@ -133,12 +133,7 @@ def pair_costs(centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b, thres
     if sigmas_a is not None and sigmas_b is not None:
         s_o = pair_thresholds(thresholds, sigmas_a[1], sigmas_b[1], s_o, thresholds.max_scale_direction)
         s_p = pair_thresholds(thresholds, sigmas_a[0], sigmas_b[0], s_p, thresholds.max_scale)
-    s_p, s_o = np.broadcast_to(s_p, angle.shape), np.broadcast_to(s_o, angle.shape)
-    ok = angle <= s_o  # the cheap test first
-    sel = np.flatnonzero(ok)
-    dist = np.full(len(angle), np.inf)
-    dist[sel] = d_p(centers_a[sel], dirs_a[sel], lengths_a[sel], centers_b[sel], dirs_b[sel], lengths_b[sel],
-                    s_p[sel])
-    ok &= dist <= s_p
+    dist = d_p(centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b, s_p)
+    ok = (angle <= s_o) & (dist <= s_p)
     cost = np.where(ok, (dist / s_p) ** 2 + (angle / s_o) ** 2, np.inf)
-    return ok, cost, s_p / thresholds.s_p * s_o / np.radians(thresholds.s_o_deg)
+    return ok, cost, np.broadcast_to(s_p / thresholds.s_p * s_o / np.radians(thresholds.s_o_deg), ok.shape)
