@@ -15,9 +15,10 @@ by the known motion (the entity type's ``transform``):
 1. Correspondences between model and observation by the entity's metric.
 2. Static entities are contradicted (beyond the paper): where this frame's
    observations are explained better, by ``static_margin`` of cost, by an
-   entity's first observation held still in the sensor's frame than held still
-   in the model's, the entity does not move with the object: it is background,
-   ``L += contradiction``, and its pairs neither confirm nor merge. Background
+   entity's first observation held still in the sensor's frame than by the
+   entity where the model has it, the entity does not move with the object: it
+   is background, ``L += contradiction``, and its pairs neither confirm nor
+   merge. Background
    is extracted as reliably as the object, but at the place a static thing
    has, so this catches it in the first frame after its first one where the
    object moved there by more than the gate; where the object did not move
