@@ -25,6 +25,12 @@ Entities are ``Segments`` in the object frame with running sums in ``extra``:
   edge thus extends the segment instead of leaving a gap that neither
   neighbour covers (the metric forgives shifts of half a length, so the gap's
   own pieces confirm the neighbours and are never added);
+- ``inv_var_position`` (N,), 1/m^2, and ``inv_var_direction`` (N,), 1/rad^2: sums of the
+  inverse variances of the merged observations' depth (``sigma_depth_m``, the weak
+  direction of stereo, so an upper bound of the position error) and direction
+  (``sigma_direction_rad``). Their inverse square roots are the segment's own
+  sigmas that gate association (``metric.candidate_pairs``): an unsure far
+  segment is looked for in a wider gate than a precise near one;
 - ``views`` (N, K, 3): up to K unit directions (object frame, segment to
   camera) from which the segment was confirmed, at least ``view_step_deg``
   apart (zero vectors where unused): the set of aspects in which it has been
@@ -49,7 +55,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .geometry import check_points, check_transform, invert, transform_points
-from .metric import MetricThresholds, candidate_pairs, d_o, d_p
+from .metric import MetricThresholds, candidate_pairs, d_o, d_p, pair_costs
 from .recording import StereoIntrinsics
 from .segments import Segments, concatenate
 from .visibility import segments_in_both_images
@@ -92,6 +98,7 @@ class LineSegmentType:
         s = Segments.empty(frame_id)
         s.extra = {"info": np.zeros((0, 3, 3)), "info_vec": np.zeros((0, 3)), "anchor": np.zeros(0),
                    "dir_sum": np.zeros((0, 3)), "weight": np.zeros(0),
+                   "inv_var_position": np.zeros(0), "inv_var_direction": np.zeros(0),
                    "views": np.zeros((0, self.params.max_views, 3), np.float32)}
         return s
 
@@ -108,8 +115,23 @@ class LineSegmentType:
         return entities.transformed(T_new_old, entities.frame_id)
 
     def correspondences(self, model: Segments, observed: Segments):
+        """Pairs within the metric's thresholds, gated by both sides' own sigmas where they carry them
+        (model segments and extracted ones alike; see ``sigmas``), with each pair's widening."""
         return candidate_pairs(model.centers, model.directions, model.lengths, observed.centers,
-                               observed.directions, observed.lengths, self.params.thresholds)
+                               observed.directions, observed.lengths, self.params.thresholds,
+                               sigmas_a=sigmas(model), sigmas_b=sigmas(observed), widening=True)
+
+    def pair_cost(self, a: Segments, b: Segments) -> np.ndarray:
+        ok, cost, _ = pair_costs(a.centers, a.directions, a.lengths, b.centers, b.directions, b.lengths,
+                                 self.params.thresholds, sigmas(a), sigmas(b))
+        return cost
+
+    def essentials(self, entities: Segments) -> Segments:
+        """Centres, directions, lengths and the two sigmas (``sigmas``) only."""
+        sig = sigmas(entities)
+        extra = {} if sig is None else {"sigma_depth_m": sig[0], "sigma_direction_rad": sig[1]}
+        return Segments(entities.frame_id, entities.centers, entities.directions, entities.lengths,
+                        entities.confidence, entities.observations, extra)
 
     def same(self, model: Segments, i: np.ndarray, j: np.ndarray):
         """Pairs of model segments within the metric's thresholds whose centres are also within
@@ -151,9 +173,12 @@ class LineSegmentType:
         out = Segments(observed.frame_id, observed.centers, u, observed.lengths, observed.confidence,
                        observed.observations)
         sigma_direction = observed.extra.get("sigma_direction_rad", np.full(len(observed), np.radians(5.0)))
+        sigma_position = np.maximum(sigma_depth, sigma_lat)
         direction_weight = w * (np.radians(p.reference_direction_sigma_deg) / np.maximum(sigma_direction, 1e-3)) ** 2
         out.extra = {"info": info, "info_vec": np.einsum("nij,nj->ni", info, observed.centers), "anchor": anchor,
                      "dir_sum": u * direction_weight[:, None], "weight": w,
+                     "inv_var_position": 1.0 / np.maximum(sigma_position, 1e-5) ** 2,
+                     "inv_var_direction": 1.0 / np.maximum(sigma_direction, 1e-4) ** 2,
                      "views": _new_views(ray, self.params.max_views)}
         return out
 
@@ -164,7 +189,7 @@ class LineSegmentType:
         x, o = model.extra, observed.extra
         extra = x  # updated in place: copying the whole model's state every frame would cost more than the merge
         scale = np.minimum(1.0, self.params.max_weight / np.maximum(x["weight"][mi], 1e-9))
-        for key in ("info", "info_vec", "dir_sum", "weight"):
+        for key in ("info", "info_vec", "dir_sum", "weight", "inv_var_position", "inv_var_direction"):
             shape = (-1,) + (1,) * (x[key].ndim - 1)
             extra[key][mi] = x[key][mi] * scale.reshape(shape)
         sign = np.where(np.sum(model.directions[mi] * observed.directions[oi], axis=1) >= 0, 1.0, -1.0)
@@ -176,6 +201,8 @@ class LineSegmentType:
         extra["info_vec"][mi] += o["info_vec"][oi] - np.einsum("nij,nj->ni", along, observed.centers[oi])
         extra["dir_sum"][mi] += o["dir_sum"][oi] * sign[:, None]
         extra["weight"][mi] += o["weight"][oi]
+        extra["inv_var_position"][mi] += o["inv_var_position"][oi]
+        extra["inv_var_direction"][mi] += o["inv_var_direction"][oi]
         views = x["views"][mi]
         for k in range(o["views"].shape[1]):
             new = o["views"][oi, k]
@@ -216,6 +243,17 @@ class LineSegmentType:
         projections = np.einsum("nkj,nj->nk", model.extra["views"], to_camera).max(axis=1)
         in_aspect = projections >= np.cos(np.radians(p.aspect_margin_deg)) * np.linalg.norm(to_camera, axis=1)
         return inside & not_critical & in_aspect
+
+
+def sigmas(segments: Segments) -> tuple[np.ndarray, np.ndarray] | None:
+    """(position sigma (N,) m, direction sigma (N,) rad) of model segments (from their inverse-variance
+    sums) or of extracted ones (``sigma_depth_m``, ``sigma_direction_rad``); None if they carry neither."""
+    x = segments.extra
+    if "inv_var_position" in x:
+        return 1.0 / np.sqrt(x["inv_var_position"]), 1.0 / np.sqrt(x["inv_var_direction"])
+    if "sigma_depth_m" in x and "sigma_direction_rad" in x:
+        return x["sigma_depth_m"], x["sigma_direction_rad"]
+    return None
 
 
 def _new_views(ray: np.ndarray, max_views: int) -> np.ndarray:

@@ -39,7 +39,7 @@ def synthetic_step(n_model: int = 5000, n_new: int = 1000, repeats: int = 30) ->
     core.update(segments(n_model), np.linalg.inv(T), FrameContext(T, intr))   # model of n_model segments
     times = []
     for _ in range(repeats):
-        state = (copy.deepcopy(core.entities), core.log_odds, core.observations, core.last_confirmed, core.frame)
+        state = copy.deepcopy({k: v for k, v in vars(core).items() if k not in ("entity_type", "rule")})
         new = segments(n_new)
         new.centers[: n_new // 2] = core.entities.centers[: n_new // 2] + [0.0, 0.0, 0.5] - \
             [0, 0, 0] + rng.normal(0, 0.0005, (n_new // 2, 3))  # half of them re-observe the model
@@ -47,7 +47,7 @@ def synthetic_step(n_model: int = 5000, n_new: int = 1000, repeats: int = 30) ->
         t0 = time.perf_counter()
         core.update(new, np.linalg.inv(T), FrameContext(T, intr))
         times.append(time.perf_counter() - t0)
-        core.entities, core.log_odds, core.observations, core.last_confirmed, core.frame = state
+        vars(core).update(state)
     return {"model": n_model, "new": n_new, "median_ms": 1000 * float(np.median(times))}
 
 

@@ -11,7 +11,7 @@ from scipy.spatial.transform import Rotation
 
 from accumcli.accumulate import Accumulator, UpdateRule, one_to_one
 from accumcli.geometry import invert, make_transform, transform_points
-from accumcli.line_model import FrameContext, LineSegmentType
+from accumcli.line_model import FrameContext, LineSegmentType, sigmas
 from accumcli.recording import StereoIntrinsics
 from accumcli.segments import Segments
 
@@ -44,6 +44,13 @@ class PointType:
             return np.zeros(0, int), np.zeros(0, int), np.zeros(0)
         pairs = cKDTree(observed.xyz).sparse_distance_matrix(cKDTree(model.xyz), self.radius, output_type="ndarray")
         return pairs["j"].astype(int), pairs["i"].astype(int), pairs["v"] / self.radius
+
+    def pair_cost(self, a, b):
+        distance = np.linalg.norm(a.xyz - b.xyz, axis=1) / self.radius
+        return np.where(distance <= 1, distance, np.inf)
+
+    def essentials(self, p):
+        return p
 
     def same(self, model, i, j):
         distance = np.linalg.norm(model.xyz[i] - model.xyz[j], axis=1)
@@ -143,31 +150,109 @@ def test_merge_trims_the_union_to_max_extent_at_both_ends():
     assert abs(merged.centers[0, 1] - 0.010) < 1e-9 and abs(merged.lengths[0] - 0.024) < 1e-9
 
 
-def _points_run(seen_every: int, frames: int):
-    """One point, always expected, observed in frames 0 and 1 (accepted) and then in one frame out of
-    ``seen_every``: its confidence history."""
+def _turning(k: int) -> np.ndarray:
+    """T_camera_object of frame k: the object 0.5 m ahead, turning by 8 degrees a frame."""
+    return make_transform(Rotation.from_rotvec([0, np.radians(8 * k), 0]).as_matrix(), [0, 0, 0.5])
+
+
+def _points_run(seen: set, frames: int, point=(0.03, 0.0, 0.0)):
+    """One point of the object (object frame), always expected, observed (in the camera frame) in the
+    frames ``seen``, on a turning object: its confidence after every frame ([] once pruned)."""
     acc = Accumulator(PointType(), Points(np.zeros((0, 3)), np.zeros(0)), UpdateRule())
-    point = Points(np.zeros((1, 3)), np.ones(1))
-    nothing = Points(np.zeros((0, 3)), np.zeros(0))
     history = []
     for k in range(frames):
-        acc.update(point if k < 2 or k % seen_every == 0 else nothing, np.eye(4))
+        T = _turning(k)
+        observed = Points(transform_points(T, np.array([point])), np.ones(1)) if k in seen else \
+            Points(np.zeros((0, 3)), np.zeros(0))
+        acc.update(observed, invert(T))
         history.append(acc.confidence.tolist())
     return history
 
 
 def test_update_rule_figures_of_the_module_docstring():
     rule = UpdateRule()
-    assert abs(rule.hit - np.log(5)) < 1e-12 and abs(rule.miss - np.log(5 / 9)) < 1e-12
-    # a new entity (0.25), missed twice: 0.16, then 0.09 < floor: pruned
-    acc = Accumulator(PointType(), Points(np.zeros((0, 3)), np.zeros(0)), UpdateRule())
-    history = []
+    assert abs(rule.hit - np.log(5)) < 1e-12
+    assert abs(rule.confirmation(2.0) - np.log(2.5)) < 1e-12 and rule.confirmation(10.0) == 0.0
+    # a miss of an entity never found again costs nothing; of one found every time, log(0.3 / 0.9)
+    assert rule.miss(rule.rate(np.array([0]), np.array([5])))[0] == 0.0
+    assert abs(rule.miss(rule.rate(np.array([20]), np.array([20])))[0] - np.log(1 / 3)) < 1e-12
+    # accepted at its first confirmation (0.625) although nine expected frames missed it before
+    assert abs(_points_run({0, 10}, 11)[-1][0] - 0.625) < 1e-9
+    # the nine misses after that cost 1.15 in all (rates 0.4 ... 0.11)
+    rates = rule.rate(np.ones(9), np.arange(1, 10))
+    assert abs(rates[0] - 0.4) < 1e-12 and abs(np.sum(rule.miss(rates)) + 1.154) < 0.001
+
+
+def test_a_segment_found_in_one_frame_of_ten_survives_and_grows():
+    history = _points_run(set(range(0, 40, 10)), 40)
+    assert all(h for h in history)                       # never pruned
+    assert history[-1][0] > 0.75                         # accepted, and more sure than at 0.625
+    # the paper's fixed p_detect of 0.5 prunes it after its second miss (0.25 -> 0.16 -> 0.09)
+    fixed = Accumulator(PointType(), Points(np.zeros((0, 3)), np.zeros(0)),
+                        UpdateRule(prior_rate=0.5, prior_views=1e12, p_max=0.5))
     for k in range(3):
-        acc.update(Points(np.zeros((1 - min(k, 1), 3)), np.ones(1 - min(k, 1))), np.eye(4))
-        history.append(acc.confidence.tolist())
-    assert abs(history[0][0] - 0.25) < 1e-12 and abs(history[1][0] - 0.156) < 0.001 and history[2] == []
-    # accepted at its first confirmation: 0.625
-    assert abs(_points_run(seen_every=1, frames=2)[1][0] - 0.625) < 1e-9
-    # survives when seen in a third of the frames that should show it (break-even is 0.27), not a fifth
-    assert _points_run(seen_every=3, frames=30)[-1][0] > 0.9
-    assert _points_run(seen_every=5, frames=30)[-1] == []
+        T = _turning(k)
+        fixed.update(Points(transform_points(T, np.array([[0.03, 0.0, 0.0]])), np.ones(1)) if k == 0 else
+                     Points(np.zeros((0, 3)), np.zeros(0)), invert(T))
+    assert len(fixed) == 0
+
+
+def test_static_background_is_pruned_the_frame_after_it_is_seen_again():
+    """A point static in the camera frame, seen in every frame, on an object turning 8 degrees a frame
+    about a point 0.5 m ahead: its place in the object frame moves by 0.5 m * 8 deg = 70 mm a frame, far
+    beyond the 2 mm gate. N = 1: each entity it creates is contradicted by the next frame (0.25 -> 0.04)
+    and pruned, so it is never accepted; the model holds one entity of it, the newest."""
+    acc = Accumulator(PointType(), Points(np.zeros((0, 3)), np.zeros(0)), UpdateRule())
+    background = np.array([[0.1, 0.05, 1.0]])      # camera frame
+    for k in range(12):
+        T = _turning(k)
+        stats = acc.update(Points(background, np.ones(1)), invert(T))
+        assert len(acc) == 1 and acc.confidence[0] == 0.25     # only this frame's, new
+        assert stats.contradicted == (1 if k else 0) and stats.pruned == (1 if k else 0)
+    # without the test (and with the paper's fixed rate) each entity lingers for two misses (0.16, then 0.09)
+    acc = Accumulator(PointType(), Points(np.zeros((0, 3)), np.zeros(0)),
+                      UpdateRule(static_margin=None, prior_rate=0.5, prior_views=1e12, p_max=0.5))
+    for k in range(4):
+        acc.update(Points(background, np.ones(1)), invert(_turning(k)))
+    assert len(acc) == 2 and sorted(acc.confidence.round(3)) == [0.156, 0.25]
+
+
+def test_an_object_that_does_not_move_is_not_contradicted():
+    """Where the object has not moved since an entity's first observation, static and object-fixed
+    predict the same place: the frame cannot tell, the entity is confirmed as usual."""
+    acc = Accumulator(PointType(), Points(np.zeros((0, 3)), np.zeros(0)), UpdateRule())
+    T = _turning(0)
+    for _ in range(3):
+        stats = acc.update(Points(np.array([[0.0, 0.0, 0.5]]), np.ones(1)), invert(T))
+    assert stats.contradicted == 0 and len(acc) == 1 and abs(acc.confidence[0] - 0.893) < 0.001  # two hits
+
+
+def _segment_at(center, sigma_depth, sigma_direction_deg=1.0) -> Segments:
+    return Segments("camera_left", np.array([center]), np.array([[0.0, 1.0, 0.0]]), np.array([0.015]),
+                    np.array([0.9]), np.ones(1, np.int64),
+                    {"sigma_depth_m": np.array([sigma_depth]), "sigma_direction_rad": np.radians([sigma_direction_deg])})
+
+
+def test_association_of_an_uncertain_far_segment_and_a_precise_near_one():
+    """A model segment observed again 5 mm deeper: at 0.8 m with a disparity sigma of 0.25 px the depth
+    sigma is 0.8^2 / (600 * 0.08) * 0.25 = 3.3 mm, and the two observations (model and frame) are 2.5 *
+    sqrt(2) * 3.3 = 11.8 mm apart at 2.5 sigmas, capped at 7.5 mm: they correspond, with a confirmation
+    worth log(0.5 / 0.25) = 0.69 only (gate 2.5 times the paper's). At 0.3 m the same disparity sigma is
+    0.5 mm: the gate stays the paper's 3 mm, and 5 mm deeper is another thing."""
+    kind = LineSegmentType()
+    for depth, sigma, expect in ((0.8, 0.8 ** 2 / 48 * 0.25, True), (0.3, 0.3 ** 2 / 48 * 0.25, False)):
+        T = make_transform(np.eye(3), [0.0, 0.0, depth])       # object frame at the segment
+        context = FrameContext(T, INTR)
+        model = kind.observe(_segment_at([0.0, 0.0, depth], sigma).transformed(invert(T), "gripper"), context)
+        deeper = kind.observe(_segment_at([0.0, 0.0, depth + 0.005], sigma).transformed(invert(T), "gripper"), context)
+        i, j, cost, wide = kind.correspondences(model, deeper)
+        assert (len(i) == 1) == expect
+        if expect:
+            assert abs(wide[0] - 2.5) < 1e-9 and abs(UpdateRule().confirmation(wide)[0] - np.log(2)) < 1e-9
+    # merged, the far segment's own sigma falls by sqrt(2): its next gate is narrower
+    T = make_transform(np.eye(3), [0.0, 0.0, 0.8])
+    context = FrameContext(T, INTR)
+    model = kind.observe(_segment_at([0.0, 0.0, 0.8], 0.0033).transformed(invert(T), "gripper"), context)
+    again = kind.observe(_segment_at([0.0, 0.0, 0.8], 0.0033).transformed(invert(T), "gripper"), context)
+    merged = kind.merge(model, again, np.array([0]), np.array([0]), context)
+    assert abs(sigmas(merged)[0][0] - 0.0033 / np.sqrt(2)) < 1e-9

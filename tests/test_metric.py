@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from accumcli.metric import MetricThresholds, candidate_pairs, d_o, d_p, f_p
+from accumcli.metric import MetricThresholds, candidate_pairs, d_o, d_p, f_p, pair_costs
 
 S_P = 0.003
 X, Y = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
@@ -38,13 +38,18 @@ def test_f_p_is_asymmetric_and_d_p_takes_the_smaller():
     assert d_p(ORIGIN, X, long_segment, p_short, X, short_segment, S_P) == forward
 
 
-def test_candidate_pairs_match_brute_force():
-    rng = np.random.default_rng(0)
-    n = 300
+def _random_segments(rng, n):
+    """Two sets of n segments in a 5 cm cube, half of b parallel to a: centres, directions, lengths."""
     ca, cb = rng.uniform(0, 0.05, (n, 3)), rng.uniform(0, 0.05, (n, 3))
     da, db = (v / np.linalg.norm(v, axis=1, keepdims=True) for v in rng.normal(size=(2, n, 3)))
     db[: n // 2] = da[: n // 2]
-    la, lb = rng.uniform(0.005, 0.02, n), rng.uniform(0.005, 0.02, n)
+    return ca, cb, da, db, rng.uniform(0.005, 0.02, n), rng.uniform(0.005, 0.02, n)
+
+
+def test_candidate_pairs_match_brute_force():
+    rng = np.random.default_rng(0)
+    n = 300
+    ca, cb, da, db, la, lb = _random_segments(rng, n)
     th = MetricThresholds(S_P, 10.0)
     i, j, cost = candidate_pairs(ca, da, la, cb, db, lb, th, neighbours=n)
     ia, jb = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
@@ -69,3 +74,45 @@ def test_frame_accuracy_counts_near_correct_and_background():
     assert {k: figures[k] for k in ("segments", "near_object", "correct_near", "background")} == \
         {"segments": 4, "near_object": 3, "correct_near": 2, "background": 1}
     assert abs(figures["completeness"] - 0.24) < 1e-9        # two 12 mm pieces of a 100 mm edge
+
+
+def _pair(offset, sigma_position, sigma_direction=np.radians(0.5), angle_deg=0.0, thresholds=MetricThresholds()):
+    """candidate_pairs of one segment (12 mm along x) and one shifted by ``offset`` and turned in the xy plane,
+    both with the given sigmas: (paired?, cost, widening)."""
+    u = np.array([[np.cos(np.radians(angle_deg)), np.sin(np.radians(angle_deg)), 0.0]])
+    sig = (np.array([sigma_position]), np.array([sigma_direction]))
+    i, j, cost, wide = candidate_pairs(np.zeros((1, 3)), X[None], np.array([0.012]), np.array([offset]), u,
+                                       np.array([0.012]), thresholds, sigmas_a=sig, sigmas_b=sig, widening=True)
+    return len(i) == 1, (cost[0] if len(i) else None), (wide[0] if len(i) else None)
+
+
+def test_gate_follows_each_pair_s_own_uncertainty():
+    # 5 mm deeper (z): a far, unsure pair (2 mm each: gate 2.5 * 2.83 = 7.1 mm) corresponds, 2.36 times the
+    # paper's gate; a precise near pair (0.3 mm each: 1.1 mm, floored at s_p = 3 mm) does not
+    paired, cost, wide = _pair([0.0, 0.0, 0.005], 0.002)
+    assert paired and abs(cost - (0.005 / (2.5 * np.sqrt(8) * 1e-3)) ** 2) < 1e-9 and abs(wide - 2.357) < 0.001
+    assert not _pair([0.0, 0.0, 0.005], 0.0003)[0]
+    # the precise pair keeps the paper's gate exactly: 2.9 mm in, 3.1 mm out, widening 1
+    assert _pair([0.0, 0.0, 0.0029], 0.0003)[2] == 1.0 and not _pair([0.0, 0.0, 0.0031], 0.0003)[0]
+    # however unsure, at most max_scale (2.5) times s_p: 7.4 mm in, 7.6 mm out
+    assert _pair([0.0, 0.0, 0.0074], 0.05)[0] and not _pair([0.0, 0.0, 0.0076], 0.05)[0]
+    # direction: by default the paper's 7 degrees whatever the sigma; with max_scale_direction 2.5, 2.5 sigmas
+    assert not _pair(ORIGIN, 0.001, np.radians(6.0), angle_deg=10.0)[0]
+    assert _pair(ORIGIN, 0.001, np.radians(6.0), angle_deg=10.0,
+                 thresholds=MetricThresholds(max_scale_direction=2.5))[0]
+
+
+def test_gated_candidate_pairs_match_brute_force():
+    rng = np.random.default_rng(2)
+    n = 300
+    ca, cb, da, db, la, lb = _random_segments(rng, n)
+    sa = (rng.uniform(0.0002, 0.004, n), rng.uniform(0.001, 0.1, n))
+    sb = (rng.uniform(0.0002, 0.004, n), rng.uniform(0.001, 0.1, n))
+    th = MetricThresholds(S_P, 10.0, max_scale_direction=2.0)
+    i, j, cost = candidate_pairs(ca, da, la, cb, db, lb, th, neighbours=n, sigmas_a=sa, sigmas_b=sb)
+    ia, jb = (x.ravel() for x in np.meshgrid(np.arange(n), np.arange(n), indexing="ij"))
+    ok, _, _ = pair_costs(ca[ia], da[ia], la[ia], cb[jb], db[jb], lb[jb], th, (sa[0][ia], sa[1][ia]),
+                          (sb[0][jb], sb[1][jb]))
+    assert set(zip(i.tolist(), j.tolist())) == set(zip(ia[ok].tolist(), jb[ok].tolist()))
+    ungated = candidate_pairs(ca, da, la, cb, db, lb, th, neighbours=n)
+    assert len(i) > len(ungated[0]) > 0 and np.all((cost >= 0) & (cost <= 2))
