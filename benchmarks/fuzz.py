@@ -573,7 +573,8 @@ CORPUS = {  # name: (class, expected outcome, how to make it)
                                    "error: size 20000x20000 is outside 1..16384 pixels",
                                    lambda p: build(p, cal_edit=lambda s, m: _cal("size", (20000, 20000), s)(s, m),
                                                    image_edit=lambda s, i, m: _big_msg(m))),
-    "image_size_mismatch": ("8 image not of its calibration's size", "warning: differs from the calibration's",
+    "image_size_mismatch": ("8 image not of its calibration's size (every frame skipped: nothing done)",
+                            "error: no stereo frame could be read in frames 0:3",
                             lambda p: build(p, cal_edit=lambda s, m: _cal("size", (320, 240), s)(s, m))),
     "tf_translation_1e20": ("/tf translation of 1e20 (NaN in the model)", "warning: invalid translation (beyond",
                             lambda p: build(p, tf=_tf(r1=("camera_left", "gripper", T0 + PERIOD, (1e20, 0, 0),
@@ -581,7 +582,8 @@ CORPUS = {  # name: (class, expected outcome, how to make it)
     "stereo_offset_5ms": ("no pair within 1 ms (exit 0, empty model)",
                           "error: left and right images are 5.0 ms apart; try --tolerance-ms 6",
                           lambda p: build(p, right_times=[T0 + i * PERIOD + 5_000_000 for i in range(3)])),
-    "no_object_frame": ("extract refused without the object frame", "ok",
+    "no_object_frame": ("extract refused without the object frame (extract runs; accumulate needs the frame)",
+                        "error: no transform path from 'camera_left' to 'gripper'",
                         lambda p: build(p, tf=[("world", "board", T0, (0, 0, 1), (0, 0, 0, 1))])),
     "odd_timestamps": ("negative, duplicate and out-of-order timestamps", "ok",
                        lambda p: build(p, left_times=[-PERIOD, -2 * PERIOD, -2 * PERIOD],
@@ -609,19 +611,26 @@ def write_corpus(folder) -> None:
 # -- running ------------------------------------------------------------------------------------
 def exercise(path: str) -> None:
     """The library runs behind ``accum info``, ``extract`` and ``accumulate`` (first 3 frames, outputs
-    into a scratch folder); only AccumError may escape."""
+    into a scratch folder), each tried; the first AccumError is raised at the end. Only AccumError
+    may escape."""
     from accumcli.runs import FrameRange, accumulate_recording, describe_recording, extract_recording
 
     out = tempfile.mkdtemp(prefix="accum-fuzz-")
+    errors = []
+    stages = (lambda: describe_recording(path),
+              lambda: extract_recording(path, os.path.join(out, "f.jsonl"), frames=FrameRange(0, 3)),
+              lambda: accumulate_recording(path, [os.path.join(out, "m.json"), os.path.join(out, "m.ply")],
+                                           frames=FrameRange(0, 3)))
     try:
-        describe_recording(path)
-        try:
-            extract_recording(path, os.path.join(out, "f.jsonl"), frames=FrameRange(0, 3))
-        finally:
-            accumulate_recording(path, [os.path.join(out, "m.json"), os.path.join(out, "m.ply")],
-                                 frames=FrameRange(0, 3))
+        for stage in stages:
+            try:
+                stage()
+            except AccumError as e:
+                errors.append(e)
     finally:
         shutil.rmtree(out, ignore_errors=True)
+    if errors:
+        raise errors[0]
 
 
 def _child(path: str, out_fd: int) -> None:

@@ -408,7 +408,7 @@ def test_a_record_longer_than_any_chunk_is_not_read(tmp_path, caplog, monkeypatc
 
 
 def test_unreadable_file(tmp_path, monkeypatch):
-    from accumcli.recording import mcap_records
+    from accumcli.recording import reader
     path = fuzz.build(tmp_path / "r.mcap")
 
     def denied(*args, **kwargs):
