@@ -102,7 +102,7 @@ def unsupported_encoding(msg) -> str | None:
     """Why an image (converted) cannot be used at all, for an error when opening; None if it may be."""
     encoding = getattr(msg, "encoding", "")
     if encoding.startswith("bayer_"):
-        return (f"images in Bayer encoding {encoding!r} are not supported (accum does not demosaic): record "
+        return (f"image encoding {encoding!r} (Bayer) is not supported (accum does not demosaic): record "
                 "mono8, mono16, rgb8 or bgr8 images, or run image_proc's debayer node first")
     return None
 

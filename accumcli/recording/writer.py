@@ -58,7 +58,7 @@ class RecordingWriter(_MessageWriter):
         self._json_channels: dict[str, int] = {}
         self.ros2 = ros2
         self._ros_schemas: dict[str, int] = {}
-        self._ros_channels: dict[str, int] = {}
+        self._ros_channels: dict[tuple[str, str], int] = {}
 
     def _put(self, topic: str, message, log_time: int) -> None:
         if self.ros2:
@@ -72,9 +72,10 @@ class RecordingWriter(_MessageWriter):
         if message.msgtype not in self._ros_schemas:
             text = typestore().generate_msgdef(message.msgtype, ros_version=2)[0]
             self._ros_schemas[message.msgtype] = raw.register_schema(message.msgtype, "ros2msg", text.encode())
-        if topic not in self._ros_channels:
-            self._ros_channels[topic] = raw.register_channel(topic, "cdr", self._ros_schemas[message.msgtype])
-        raw.add_message(self._ros_channels[topic], log_time=int(log_time), data=message.cdr,
+        key = (topic, message.msgtype)
+        if key not in self._ros_channels:
+            self._ros_channels[key] = raw.register_channel(topic, "cdr", self._ros_schemas[message.msgtype])
+        raw.add_message(self._ros_channels[key], log_time=int(log_time), data=message.cdr,
                         publish_time=int(log_time))
 
     def message(self, topic: str, message, t_ns: int) -> None:
@@ -110,15 +111,16 @@ class Rosbag2Writer(_MessageWriter):
 
         self._writer = BagWriter(path, version=9)
         self._writer.open()
-        self._connections: dict[str, object] = {}
+        self._connections: dict[tuple[str, str], object] = {}
 
     def _put(self, topic: str, message, log_time: int) -> None:
         self.ros_message(topic, ros_from_foxglove(message), log_time)
 
     def ros_message(self, topic: str, message: RosMessage, log_time: int) -> None:
-        if topic not in self._connections:
-            self._connections[topic] = self._writer.add_connection(topic, message.msgtype, typestore=typestore())
-        self._writer.write(self._connections[topic], int(log_time), message.cdr)
+        key = (topic, message.msgtype)
+        if key not in self._connections:
+            self._connections[key] = self._writer.add_connection(topic, message.msgtype, typestore=typestore())
+        self._writer.write(self._connections[key], int(log_time), message.cdr)
 
     def __enter__(self) -> "Rosbag2Writer":
         return self
