@@ -229,3 +229,34 @@ def test_a_topic_with_another_ros_type_is_an_error(tmp_path):
 def test_directory_without_metadata_is_a_clear_error(tmp_path):
     with pytest.raises(RecordingError, match="directory without metadata.yaml"):
         Recording(tmp_path)
+
+
+def test_unusable_ros2msg_schema_is_a_one_line_error(tmp_path):
+    from mcap.writer import Writer
+
+    path = tmp_path / "badschema.mcap"
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start()
+        schema = w.register_schema(ROS_CAMERA_INFO, "ros2msg", b"float64[9 k\nnot a field\n")
+        channel = w.register_channel("/stereo/left/calibration", "cdr", schema)
+        w.add_message(channel, log_time=1, data=b"\x00\x01\x00\x00", publish_time=1)
+        w.finish()
+    with pytest.raises(RecordingError) as e:
+        Recording(path)
+    assert "topic /stereo/left/calibration carries sensor_msgs/msg/CameraInfo: its ros2msg schema cannot be " \
+           "parsed" in str(e.value) and "\n" not in str(e.value)
+
+
+def test_damaged_bags_are_one_line_errors(ros_forms, tmp_path):
+    folder = tmp_path / "bag"
+    shutil.copytree(ros_forms["folder"], folder)
+    (folder / "metadata.yaml").write_text("rosbag2_bagfile_information: [unclosed\n")
+    with pytest.raises(RecordingError, match="cannot be read as a rosbag2 bag") as e:
+        Recording(folder)
+    assert "\n" not in str(e.value)
+    half = tmp_path / "half.db3"
+    data = open(ros_forms["db3"], "rb").read()
+    half.write_bytes(data[:len(data) // 2])
+    with pytest.raises(RecordingError, match="half.db3: cannot be read as a rosbag2 bag"):
+        Recording(half)

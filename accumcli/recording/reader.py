@@ -1,5 +1,11 @@
 """Streaming reader of stereo recordings (formats.md section 1).
 
+What ``path`` is, is found by content: a folder with ``metadata.yaml`` is a rosbag2 bag, a file
+starting with SQLite's magic a bare rosbag2 ``.db3`` (both read with ``rosbags``, ``ros2``); any other
+file must be MCAP, whose channels may each be Foxglove protobuf or ROS 2 CDR (``ros2msg`` schema).
+ROS 2 messages are converted to the Foxglove protobuf messages on decoding (``ros2``), so
+everything below is the same for every form.
+
 ``Recording(path)`` reads the MCAP file front to back with accum's own record
 parser (``mcap_records``: never trusting a declared length beyond what the file
 or the chunk holds; it says why not the mcap library's reader) and raises
@@ -28,7 +34,12 @@ Choices where formats.md is silent:
 - Messages are taken in file order; within a chunk, in log-time order.
 - Messages are decoded with the Foxglove protobuf classes accum ships, after
   checking the channel's schema name (a topic carrying another type is a
-  ``RecordingError``); the recording's descriptor set is not compiled.
+  ``RecordingError``); the recording's descriptor set is not compiled. CDR
+  messages are decoded with the channel's own ros2msg schema (``ros2``).
+- Images in a Bayer encoding are a ``RecordingError`` when the recording opens.
+- When a default topic is missing and the recording has ROS 2 image topics with
+  CameraInfo siblings, the error proposes the four topic options
+  (``ros2.propose_topics``).
 - An image or transform whose timestamp field is unset (zero) uses its log time.
 - Timestamps may be negative, duplicate or out of order. Images are paired in
   arrival order: an image pairs with a pending image of the other camera within

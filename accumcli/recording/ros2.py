@@ -120,7 +120,7 @@ def mcap_cdr_decoder(channel: _Channel) -> Callable[[memoryview], object]:
     try:
         decode = DecoderFactory().decoder_for("cdr", schema)
     except Exception as e:  # the ros2msg parser raises its own error types
-        raise ValueError(f"its ros2msg schema cannot be parsed ({e})") from None
+        raise ValueError(f"its ros2msg schema cannot be parsed ({_one_line(e)})") from None
     if decode is None:
         raise ValueError("no CDR decoder for its schema")
     convert = CONVERTERS[channel.schema_name]
@@ -138,6 +138,10 @@ def typestore():
 
         _TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)
     return _TYPESTORE
+
+
+def _one_line(e: Exception) -> str:
+    return " ".join(str(e).split())[:300]
 
 
 def bag_kind(path: str) -> str | None:
@@ -173,7 +177,7 @@ class RosbagScan:
         try:
             reader = self._open()
         except Exception as e:  # rosbags raises its own errors, and sqlite3 / yaml ones through it
-            raise RecordingError(f"{self.path}: cannot be read as a rosbag2 bag ({e})") from None
+            raise RecordingError(f"{self.path}: cannot be read as a rosbag2 bag ({_one_line(e)})") from None
         try:
             for c in reader.connections:
                 self.channels[c.id] = _Channel(c.id, c.msgtype, c.topic, c.ext.serialization_format
@@ -184,7 +188,7 @@ class RosbagScan:
                     yield _Message(c.id, int(timestamp), memoryview(data))
             except Exception as e:
                 raise RecordingError(f"{self.path}: rosbag2 bag damaged after {self.last_time_ns or 0} ns "
-                                     f"({type(e).__name__}: {e})") from None
+                                     f"({type(e).__name__}: {_one_line(e)})") from None
         finally:
             reader.close()
 
