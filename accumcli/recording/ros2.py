@@ -10,11 +10,11 @@ Conversions (ROS 2 message -> Foxglove protobuf message):
 - ``sensor_msgs/msg/CompressedImage`` -> ``foxglove.CompressedImage`` (format, data; PNG or JPEG by
   signature, as for protobuf).
 - ``sensor_msgs/msg/CameraInfo`` -> ``foxglove.CameraCalibration``: d, k, r, p to D, K, R, P;
-  distortion_model as written (plumb_bob, rational_polynomial or equidistant are what
-  ``calibration`` knows).
+  distortion_model as written (``calibration`` takes plumb_bob and rational_polynomial and refuses
+  others with a ``RecordingError``).
 - ``tf2_msgs/msg/TFMessage`` -> ``foxglove.FrameTransforms``: header.frame_id is the parent.
 - Every timestamp is ``header.stamp``; a zero stamp is left unset, so the reader uses the log time
-  (as for an unset protobuf timestamp).
+  (as for an unset protobuf timestamp); a nanosec beyond int32 makes the message undecodable.
 
 MCAP-CDR messages are decoded by ``mcap_ros2``'s decoder from the file's own ``ros2msg`` schema;
 rosbag2 messages by ``rosbags``' typestore (``Stores.ROS2_HUMBLE``; the four message types are the
