@@ -46,12 +46,14 @@ def _forms(source: str, directory, names=None) -> dict[str, str]:
     """The protobuf recording ``source`` as ROS 2 MCAP, rosbag2 folder and bare .db3 in ``directory``."""
     names = names or {}
     mcap, folder, bare = directory / "cdr.mcap", directory / "bag", directory / "bare.db3"
+    mcap_folder = directory / "mcapbag"
     with RecordingWriter(mcap, ros2=True) as w:
         convert_to_ros2(source, _Renaming(w, names))
-    with Rosbag2Writer(folder) as w:
-        convert_to_ros2(source, _Renaming(w, names))
+    for path, storage in ((folder, "sqlite3"), (mcap_folder, "mcap")):
+        with Rosbag2Writer(path, storage) as w:
+            convert_to_ros2(source, _Renaming(w, names))
     shutil.copy(glob.glob(str(folder / "*.db3"))[0], bare)
-    return {"mcap-cdr": str(mcap), "folder": str(folder), "db3": str(bare)}
+    return {"mcap-cdr": str(mcap), "folder": str(folder), "db3": str(bare), "mcap-folder": str(mcap_folder)}
 
 
 @pytest.fixture(scope="module")

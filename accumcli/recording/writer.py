@@ -103,13 +103,15 @@ class RecordingWriter(_MessageWriter):
 
 
 class Rosbag2Writer(_MessageWriter):
-    """A rosbag2 folder (``metadata.yaml`` + one ``.db3``, version 9) written with ``rosbags``: the
-    calibrations, images and transforms as ROS 2 messages; log time = the message time."""
+    """A rosbag2 folder (``metadata.yaml`` + one ``.db3``, or one ``.mcap`` with ``storage="mcap"``;
+    version 9) written with ``rosbags``: the calibrations, images and transforms as ROS 2 messages;
+    log time = the message time."""
 
-    def __init__(self, path):
+    def __init__(self, path, storage: str = "sqlite3"):
+        from rosbags.rosbag2 import StoragePlugin
         from rosbags.rosbag2 import Writer as BagWriter
 
-        self._writer = BagWriter(path, version=9)
+        self._writer = BagWriter(path, version=9, storage_plugin=StoragePlugin[storage.upper()])
         self._writer.open()
         self._connections: dict[tuple[str, str], object] = {}
 
