@@ -64,6 +64,9 @@ class _Channel:
     schema_name: str
     topic: str
     message_encoding: str
+    schema_id: int = 0
+    schema_encoding: str = ""
+    schema_data: bytes = b""
 
 
 @dataclass
@@ -125,11 +128,12 @@ class McapScan:
     def _define(self, opcode: int, content: memoryview) -> None:
         f = _Fields(content)
         if opcode == _OP_SCHEMA:
-            schema_id, name = f.int(2), f.string()
-            self.schemas[schema_id] = name
+            schema_id, name, encoding = f.int(2), f.string(), f.string()
+            self.schemas[schema_id] = (name, encoding, bytes(f.take(f.int(4))))
         else:
             channel_id, schema_id, topic, encoding = f.int(2), f.int(2), f.string(), f.string()
-            self.channels[channel_id] = _Channel(channel_id, self.schemas.get(schema_id, ""), topic, encoding)
+            name, schema_encoding, data = self.schemas.get(schema_id, ("", "", b""))
+            self.channels[channel_id] = _Channel(channel_id, name, topic, encoding, schema_id, schema_encoding, data)
 
     @staticmethod
     def _message(content: memoryview) -> _Message:

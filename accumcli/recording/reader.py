@@ -1,5 +1,11 @@
 """Streaming reader of stereo recordings (formats.md section 1).
 
+What ``path`` is, is found by content: a folder with ``metadata.yaml`` is a rosbag2 bag, a file
+starting with SQLite's magic a bare rosbag2 ``.db3`` (both read with ``rosbags``, ``ros2``); any other
+file must be MCAP, whose channels may each be Foxglove protobuf or ROS 2 CDR (``ros2msg`` schema).
+ROS 2 messages are converted to the Foxglove protobuf messages on decoding (``ros2``), so
+everything below is the same for every form.
+
 ``Recording(path)`` reads the MCAP file front to back with accum's own record
 parser (``mcap_records``: never trusting a declared length beyond what the file
 or the chunk holds; it says why not the mcap library's reader) and raises
@@ -28,7 +34,12 @@ Choices where formats.md is silent:
 - Messages are taken in file order; within a chunk, in log-time order.
 - Messages are decoded with the Foxglove protobuf classes accum ships, after
   checking the channel's schema name (a topic carrying another type is a
-  ``RecordingError``); the recording's descriptor set is not compiled.
+  ``RecordingError``); the recording's descriptor set is not compiled. CDR
+  messages are decoded with the channel's own ros2msg schema (``ros2``).
+- Images in a Bayer encoding are a ``RecordingError`` when the recording opens.
+- When a default topic is missing and the recording has ROS 2 image topics with
+  CameraInfo siblings, the error proposes the four topic options
+  (``ros2.propose_topics``).
 - An image or transform whose timestamp field is unset (zero) uses its log time.
 - Timestamps may be negative, duplicate or out of order. Images are paired in
   arrival order: an image pairs with a pending image of the other camera within
@@ -65,6 +76,7 @@ from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 from ..errors import PoseUnavailable, RecordingError
 from ..logs import LimitedWarnings
 from .calibration import CameraCalibration, StereoIntrinsics, StereoRectifier
+from . import ros2
 from .mcap_records import MCAP_MAGIC, McapScan
 from .messages import (
     DecodeError,
@@ -83,6 +95,8 @@ OFFSET_SAMPLES = 4096       # left/right offsets kept to measure the typical one
 IMAGE_TYPES = {"foxglove.CompressedImage": CompressedImage, "foxglove.RawImage": RawImage}
 CALIBRATION_TYPES = {"foxglove.CameraCalibration": CalibrationMsg}
 TF_TYPES = {"foxglove.FrameTransform": FrameTransform, "foxglove.FrameTransforms": FrameTransforms}
+ROS_TYPES = {"image": ros2.ROS_IMAGE_TYPES, "calibration": (ros2.ROS_CAMERA_INFO,), "tf": (ros2.ROS_TF,)}
+PROTOBUF_TYPES = {"image": IMAGE_TYPES, "calibration": CALIBRATION_TYPES, "tf": TF_TYPES}
 
 @dataclass(frozen=True)
 class Topics:
@@ -237,8 +251,12 @@ class Recording:
     def _check_file(self) -> None:
         if not os.path.exists(self.path):
             raise self._fail("no such file")
+        self.bag = ros2.bag_kind(self.path)
+        if self.bag is not None:
+            self.size, self.truncated = 0, False
+            return
         if not os.path.isfile(self.path):
-            raise self._fail("not a file")
+            raise self._fail("a directory without metadata.yaml (neither an MCAP file nor a rosbag2 folder)")
         self.size = os.path.getsize(self.path)
         if self.size == 0:
             raise self._fail("empty file")
@@ -252,10 +270,29 @@ class Recording:
         if head != MCAP_MAGIC:
             raise self._fail("not an MCAP file (wrong magic bytes)")
 
-    def _roles(self) -> dict[str, dict]:
+    def _roles(self) -> dict[str, str]:
         t = self.topics
-        return {t.left_image: IMAGE_TYPES, t.right_image: IMAGE_TYPES, t.left_calibration: CALIBRATION_TYPES,
-                t.right_calibration: CALIBRATION_TYPES, t.tf: TF_TYPES, t.tf_static: TF_TYPES}
+        return {t.left_image: "image", t.right_image: "image", t.left_calibration: "calibration",
+                t.right_calibration: "calibration", t.tf: "tf", t.tf_static: "tf"}
+
+    @staticmethod
+    def _expected(role: str) -> str:
+        return (f"protobuf {' or '.join(PROTOBUF_TYPES[role])} or cdr {' or '.join(ROS_TYPES[role])}")
+
+    def _decoder(self, scan, channel, role: str) -> Callable:
+        """bytes -> Foxglove protobuf message for ``channel`` in its ``role``; raises RecordingError."""
+        protobuf = PROTOBUF_TYPES[role].get(channel.schema_name)
+        if protobuf is not None and channel.message_encoding == "protobuf":
+            return lambda data: protobuf.FromString(bytes(data))
+        if channel.schema_name in ROS_TYPES[role] and channel.message_encoding == "cdr":
+            if isinstance(scan, ros2.RosbagScan):
+                return scan.decoder(channel)
+            try:
+                return ros2.mcap_cdr_decoder(channel)
+            except ValueError as e:
+                raise self._fail(f"topic {channel.topic} carries {channel.schema_name}: {e}") from None
+        raise self._fail(f"topic {channel.topic} carries {channel.schema_name or 'no schema'} "
+                         f"({channel.message_encoding or 'no'} encoding), expected {self._expected(role)}")
 
     def _scan(self, warn: LimitedWarnings, wanted: set[str],
               first: bool = False) -> Iterator[tuple[str, int, object]]:
@@ -264,8 +301,8 @@ class Recording:
         The ``first`` pass also counts the messages per channel and keeps the channels and the scan's
         damage report (``_first_scan``).
         """
-        channels, schemas, roles = {}, {}, self._roles()
-        scan = McapScan(self.path, warn, channels, schemas)
+        channels, schemas, roles, decoders = {}, {}, self._roles(), {}
+        scan = ros2.RosbagScan(self.path, channels) if self.bag else McapScan(self.path, warn, channels, schemas)
         counts: dict[int, int] = {}
         if first:
             self._first_scan, self.message_counts, self._channels_seen = scan, counts, channels
@@ -278,14 +315,12 @@ class Recording:
             counts[channel.id] = counts.get(channel.id, 0) + 1
             if channel.topic not in wanted:
                 continue
-            types = roles[channel.topic]
-            if channel.schema_name not in types or channel.message_encoding != "protobuf":
-                expected = " or ".join(types)
-                raise self._fail(f"topic {channel.topic} carries {channel.schema_name or 'no schema'} "
-                                 f"({channel.message_encoding or 'no'} encoding), expected protobuf {expected}")
+            decode = decoders.get(channel.id)
+            if decode is None:
+                decode = decoders[channel.id] = self._decoder(scan, channel, roles[channel.topic])
             try:
-                decoded = types[channel.schema_name].FromString(bytes(message.data))
-            except Exception as e:  # protobuf raises its own DecodeError types
+                decoded = decode(message.data)
+            except Exception as e:  # protobuf and the CDR decoders raise their own error types
                 warn("undecodable message", "%s: message on %s at %.3f s cannot be decoded (%s): skipped",
                      self.path, channel.topic, message.log_time * 1e-9, e)
                 continue
@@ -315,6 +350,9 @@ class Recording:
         with LimitedWarnings(log, prefix=f"{self.path}: ") as warn:
             for topic, log_time, msg in self._scan(warn, wanted, first=True):
                 if topic in (t.left_image, t.right_image):
+                    refused = ros2.unsupported_encoding(msg)
+                    if refused:
+                        raise self._fail(f"{topic}: {refused}")
                     t_ns = self._stamp(msg, log_time, warn, topic)
                     if t_ns is not None:
                         self.frame_count_hint += len(pairing.add(topic, _PendingImage(t_ns, None)))
@@ -356,6 +394,8 @@ class Recording:
         self.unpaired_count = unpaired["count"]
         self.stereo_offset_ns = pairing.typical_offset_ns
         self._channels = {c.topic: c for c in self._channels_seen.values()}
+        if not self._channels and self.bag:
+            raise self._fail("rosbag2 bag without any topic")
         if not self._channels:
             how = "truncated" if self.truncated else "corrupt"
             raise self._fail(f"{how} MCAP file: no readable channel in its {self.size} bytes"
@@ -375,12 +415,15 @@ class Recording:
         available = ", ".join(sorted(self._channels)) or "none"
         for topic in (t.left_image, t.right_image, t.left_calibration, t.right_calibration):
             if topic not in self._channels:
-                raise self._fail(f"missing topic {topic} (topics found: {available}){self._lost()}")
-        for topic, types in self._roles().items():
+                proposal = ros2.propose_topics(self._channels)
+                hint = f"; this recording looks like ROS 2: try {proposal}" if proposal else ""
+                raise self._fail(f"missing topic {topic}{hint} (topics found: {available}){self._lost()}")
+        for topic, role in self._roles().items():
             channel = self._channels.get(topic)
-            if channel is not None and channel.schema_name not in types:
+            if channel is not None and (channel.schema_name not in PROTOBUF_TYPES[role]
+                                        and channel.schema_name not in ROS_TYPES[role]):
                 raise self._fail(f"topic {topic} carries {channel.schema_name or 'no schema'}, expected "
-                                 f"{' or '.join(types)}")
+                                 f"{self._expected(role)}")
         if require_pose and t.tf not in self._channels and t.tf_static not in self._channels:
             raise self._fail(f"missing topic {t.tf}: no transforms, so no pose of {self.object_frame!r} "
                              f"(topics found: {available})")

@@ -1,7 +1,10 @@
 """Writing recordings (simulator output, tracked poses) as MCAP with Foxglove
 protobuf schemas, so they open in Foxglove. Written to a path, the file appears
 atomically when the writer is closed without error (``atomic.atomic_open``);
-or to a binary file opened by an ``outputs.OutputSet``, which then owns it."""
+or to a binary file opened by an ``outputs.OutputSet``, which then owns it.
+With ``ros2=True`` calibrations, images and transforms are ROS 2 messages instead (CDR with
+``ros2msg`` schemas, as ``ros2 bag record -s mcap`` writes; ``ros2`` builds them); ``rosbag2``
+writes the folder form (``Rosbag2Writer``)."""
 
 from __future__ import annotations
 
@@ -15,25 +18,21 @@ from ..atomic import opened
 from ..geometry import quat_from_transform
 from .calibration import CameraCalibration
 from .messages import calibration_to_msg, image_to_msg, transform_to_msg
+from .ros2 import RosMessage, ros_from_foxglove, typestore
 
 
-class RecordingWriter:
-    """Context manager writing protobuf messages to ``target`` (a path or an open binary
-    file); log time = the message time."""
+class _MessageWriter:
+    """Calibrations, images and transforms as Foxglove protobuf messages, handed to ``_put``."""
 
-    def __init__(self, target):
-        self._stack = contextlib.ExitStack()
-        self._file = self._stack.enter_context(opened(target, "wb"))
-        self._writer = Writer(self._file)
-        self._json_channels: dict[str, int] = {}
+    def _put(self, topic: str, message, log_time: int) -> None:
+        raise NotImplementedError
 
     def calibration(self, topic: str, calibration: CameraCalibration, t_ns: int) -> None:
-        self._writer.write_message(topic, calibration_to_msg(calibration, t_ns), log_time=t_ns, publish_time=t_ns)
+        self._put(topic, calibration_to_msg(calibration, t_ns), t_ns)
 
     def image(self, topic: str, image: np.ndarray, t_ns: int, frame_id: str, encoding: str = "png") -> None:
         """Write an (H, W) uint8 image as png, jpeg or mono8."""
-        self._writer.write_message(topic, image_to_msg(image, t_ns, frame_id, encoding), log_time=t_ns,
-                                   publish_time=t_ns)
+        self._put(topic, image_to_msg(image, t_ns, frame_id, encoding), t_ns)
 
     def transform(self, parent: str, child: str, T_parent_child: np.ndarray, t_ns: int, topic: str = "/tf",
                   log_time_ns: int | None = None) -> None:
@@ -43,9 +42,41 @@ class RecordingWriter:
     def raw_transform(self, parent: str, child: str, translation, quat_xyzw, t_ns: int, topic: str = "/tf",
                       log_time_ns: int | None = None) -> None:
         """A transform given as translation and quaternion as they are (possibly invalid, for tests)."""
-        log_time = t_ns if log_time_ns is None else log_time_ns
-        self._writer.write_message(topic, transform_to_msg(parent, child, t_ns, translation, quat_xyzw),
-                                   log_time=log_time, publish_time=log_time)
+        self._put(topic, transform_to_msg(parent, child, t_ns, translation, quat_xyzw),
+                  t_ns if log_time_ns is None else log_time_ns)
+
+
+class RecordingWriter(_MessageWriter):
+    """Context manager writing protobuf messages to ``target`` (a path or an open binary
+    file); log time = the message time. ``ros2``: calibrations, images and transforms as ROS 2
+    messages (CDR, ``ros2.ros_from_foxglove``)."""
+
+    def __init__(self, target, ros2: bool = False):
+        self._stack = contextlib.ExitStack()
+        self._file = self._stack.enter_context(opened(target, "wb"))
+        self._writer = Writer(self._file)
+        self._json_channels: dict[str, int] = {}
+        self.ros2 = ros2
+        self._ros_schemas: dict[str, int] = {}
+        self._ros_channels: dict[tuple[str, str], int] = {}
+
+    def _put(self, topic: str, message, log_time: int) -> None:
+        if self.ros2:
+            self.ros_message(topic, ros_from_foxglove(message), log_time)
+        else:
+            self._writer.write_message(topic, message, log_time=log_time, publish_time=log_time)
+
+    def ros_message(self, topic: str, message: RosMessage, log_time: int) -> None:
+        """A ROS 2 message as CDR on ``topic`` (its schema: the ros2msg text of its type)."""
+        raw = self._writer._writer   # the mcap writer under mcap_protobuf's
+        if message.msgtype not in self._ros_schemas:
+            text = typestore().generate_msgdef(message.msgtype, ros_version=2)[0]
+            self._ros_schemas[message.msgtype] = raw.register_schema(message.msgtype, "ros2msg", text.encode())
+        key = (topic, message.msgtype)
+        if key not in self._ros_channels:
+            self._ros_channels[key] = raw.register_channel(topic, "cdr", self._ros_schemas[message.msgtype])
+        raw.add_message(self._ros_channels[key], log_time=int(log_time), data=message.cdr,
+                        publish_time=int(log_time))
 
     def message(self, topic: str, message, t_ns: int) -> None:
         """Any protobuf message (e.g. a ``foxglove.SceneUpdate``) on ``topic`` at ``t_ns``."""
@@ -69,3 +100,32 @@ class RecordingWriter:
         if exc_type is None:
             self._writer.finish()
         self._stack.__exit__(exc_type, exc, tb)
+
+
+class Rosbag2Writer(_MessageWriter):
+    """A rosbag2 folder (``metadata.yaml`` + one ``.db3``, or one ``.mcap`` with ``storage="mcap"``;
+    version 9) written with ``rosbags``: the calibrations, images and transforms as ROS 2 messages;
+    log time = the message time."""
+
+    def __init__(self, path, storage: str = "sqlite3"):
+        from rosbags.rosbag2 import StoragePlugin
+        from rosbags.rosbag2 import Writer as BagWriter
+
+        self._writer = BagWriter(path, version=9, storage_plugin=StoragePlugin[storage.upper()])
+        self._writer.open()
+        self._connections: dict[tuple[str, str], object] = {}
+
+    def _put(self, topic: str, message, log_time: int) -> None:
+        self.ros_message(topic, ros_from_foxglove(message), log_time)
+
+    def ros_message(self, topic: str, message: RosMessage, log_time: int) -> None:
+        key = (topic, message.msgtype)
+        if key not in self._connections:
+            self._connections[key] = self._writer.add_connection(topic, message.msgtype, typestore=typestore())
+        self._writer.write(self._connections[key], int(log_time), message.cdr)
+
+    def __enter__(self) -> "Rosbag2Writer":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        self._writer.close()

@@ -1,0 +1,300 @@
+"""ROS 2 recordings: MCAP with ``ros2msg`` schemas and CDR messages, rosbag2 folders and bare ``.db3``
+files, read into the same Foxglove protobuf messages the protobuf path decodes, so that everything
+after decoding (``reader``, ``messages``) is one code path.
+
+Conversions (ROS 2 message -> Foxglove protobuf message):
+- ``sensor_msgs/msg/Image`` -> ``foxglove.RawImage`` (width, height, encoding, step, data). mono16
+  with ``is_bigendian`` set is byte-swapped to the little-endian RawImage layout. ``bayer_*``
+  encodings are refused when the recording is opened (``unsupported_encoding``): accum does not
+  demosaic.
+- ``sensor_msgs/msg/CompressedImage`` -> ``foxglove.CompressedImage`` (format, data; PNG or JPEG by
+  signature, as for protobuf).
+- ``sensor_msgs/msg/CameraInfo`` -> ``foxglove.CameraCalibration``: d, k, r, p to D, K, R, P;
+  distortion_model as written (``calibration`` takes plumb_bob and rational_polynomial and refuses
+  others with a ``RecordingError``).
+- ``tf2_msgs/msg/TFMessage`` -> ``foxglove.FrameTransforms``: header.frame_id is the parent.
+- Every timestamp is ``header.stamp``; a zero stamp is left unset, so the reader uses the log time
+  (as for an unset protobuf timestamp); a nanosec beyond int32 makes the message undecodable.
+
+MCAP-CDR messages are decoded by ``mcap_ros2``'s decoder from the file's own ``ros2msg`` schema;
+rosbag2 messages by ``rosbags``' typestore (``Stores.ROS2_HUMBLE``; the four message types are the
+same in every ROS 2 distribution), since a ``.db3`` need not carry its message definitions.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import dataclass
+from typing import Callable, Iterator
+
+import numpy as np
+from foxglove_schemas_protobuf.CameraCalibration_pb2 import (
+    CameraCalibration as CalibrationMsg,
+)
+from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
+from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
+from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+from google.protobuf.timestamp_pb2 import Timestamp
+
+from ..errors import RecordingError
+from .mcap_records import _Channel, _Message
+
+ROS_IMAGE, ROS_COMPRESSED = "sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage"
+ROS_CAMERA_INFO, ROS_TF = "sensor_msgs/msg/CameraInfo", "tf2_msgs/msg/TFMessage"
+ROS_IMAGE_TYPES = (ROS_IMAGE, ROS_COMPRESSED)
+SQLITE_MAGIC = b"SQLite format 3\x00"
+
+log = logging.getLogger("accumcli")
+
+
+def _stamp(header) -> Timestamp | None:
+    sec, nanosec = int(header.stamp.sec), int(header.stamp.nanosec)
+    return None if sec == 0 and nanosec == 0 else Timestamp(seconds=sec, nanos=nanosec)
+
+
+def _with_stamp(msg, header):
+    stamp = _stamp(header)
+    if stamp is not None:
+        msg.timestamp.CopyFrom(stamp)
+    return msg
+
+
+def image_from_ros(m) -> RawImage:
+    data = bytes(m.data)
+    encoding = str(m.encoding)
+    if m.is_bigendian and encoding in ("mono16", "16UC1"):
+        data = np.frombuffer(data[:len(data) // 2 * 2], ">u2").astype("<u2").tobytes()
+    return _with_stamp(RawImage(frame_id=m.header.frame_id, width=int(m.width), height=int(m.height),
+                                encoding=encoding, step=int(m.step), data=data), m.header)
+
+
+def compressed_from_ros(m) -> CompressedImage:
+    return _with_stamp(CompressedImage(frame_id=m.header.frame_id, format=str(m.format), data=bytes(m.data)),
+                       m.header)
+
+
+def calibration_from_ros(m) -> CalibrationMsg:
+    return _with_stamp(CalibrationMsg(
+        frame_id=m.header.frame_id, width=int(m.width), height=int(m.height),
+        distortion_model=str(m.distortion_model), D=[float(v) for v in m.d], K=[float(v) for v in m.k],
+        R=[float(v) for v in m.r], P=[float(v) for v in m.p]), m.header)
+
+
+def transforms_from_ros(m) -> FrameTransforms:
+    out = FrameTransforms()
+    for tf in m.transforms:
+        msg = _with_stamp(FrameTransform(parent_frame_id=tf.header.frame_id, child_frame_id=tf.child_frame_id),
+                          tf.header)
+        t, q = tf.transform.translation, tf.transform.rotation
+        msg.translation.x, msg.translation.y, msg.translation.z = float(t.x), float(t.y), float(t.z)
+        msg.rotation.x, msg.rotation.y, msg.rotation.z, msg.rotation.w = float(q.x), float(q.y), float(q.z), float(q.w)
+        out.transforms.append(msg)
+    return out
+
+
+CONVERTERS: dict[str, Callable] = {ROS_IMAGE: image_from_ros, ROS_COMPRESSED: compressed_from_ros,
+                                   ROS_CAMERA_INFO: calibration_from_ros, ROS_TF: transforms_from_ros}
+
+
+def unsupported_encoding(msg) -> str | None:
+    """Why an image (converted) cannot be used at all, for an error when opening; None if it may be."""
+    encoding = getattr(msg, "encoding", "")
+    if encoding.startswith("bayer_"):
+        return (f"image encoding {encoding!r} (Bayer) is not supported (accum does not demosaic): record "
+                "mono8, mono16, rgb8 or bgr8 images, or run image_proc's debayer node first")
+    return None
+
+
+def mcap_cdr_decoder(channel: _Channel) -> Callable[[memoryview], object]:
+    """bytes -> Foxglove protobuf message for an MCAP channel of CDR messages with a ros2msg schema;
+    raises ValueError when the schema cannot be used."""
+    from mcap.records import Schema
+    from mcap_ros2.decoder import DecoderFactory
+
+    if channel.schema_encoding != "ros2msg":
+        raise ValueError(f"schema encoding {channel.schema_encoding or 'none'!r}, expected ros2msg")
+    schema = Schema(id=channel.schema_id, name=channel.schema_name, encoding=channel.schema_encoding,
+                    data=channel.schema_data)
+    try:
+        decode = DecoderFactory().decoder_for("cdr", schema)
+    except Exception as e:  # the ros2msg parser raises its own error types
+        raise ValueError(f"its ros2msg schema cannot be parsed ({_one_line(e)})") from None
+    if decode is None:
+        raise ValueError("no CDR decoder for its schema")
+    convert = CONVERTERS[channel.schema_name]
+    return lambda data: convert(decode(bytes(data)))
+
+
+_TYPESTORE = None
+
+
+def typestore():
+    """The rosbags typestore of the standard ROS 2 messages (built once)."""
+    global _TYPESTORE
+    if _TYPESTORE is None:
+        from rosbags.typesys import Stores, get_typestore
+
+        _TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)
+    return _TYPESTORE
+
+
+def _one_line(e: Exception) -> str:
+    return " ".join(str(e).split())[:300]
+
+
+def bag_kind(path: str) -> str | None:
+    """'rosbag2' for a folder with metadata.yaml, 'db3' for an SQLite file, None otherwise."""
+    if os.path.isdir(path):
+        return "rosbag2" if os.path.isfile(os.path.join(path, "metadata.yaml")) else None
+    try:
+        with open(path, "rb") as f:
+            return "db3" if f.read(len(SQLITE_MAGIC)) == SQLITE_MAGIC else None
+    except OSError:
+        return None
+
+
+class RosbagScan:
+    """One pass over a rosbag2 folder or ``.db3`` with ``rosbags``, with ``McapScan``'s interface:
+    ``messages()`` yields ``_Message`` in the bag's time order, ``channels`` fills as the bag opens;
+    ``decoder(channel)`` gives bytes -> Foxglove protobuf message. A bag ``rosbags`` cannot open is a
+    ``RecordingError``; the damage fields stay empty (rosbags reads whole files or fails)."""
+
+    lost_bytes, broken, footer, last_time_ns = 0, None, True, None
+
+    def __init__(self, path: str, channels: dict):
+        self.path, self.channels = path, channels
+
+    def _open(self):
+        from rosbags.rosbag2 import Reader
+
+        reader = Reader(self.path)
+        reader.open()
+        return reader
+
+    def messages(self) -> Iterator[_Message]:
+        try:
+            reader = self._open()
+        except Exception as e:  # rosbags raises its own errors, and sqlite3 / yaml ones through it
+            raise RecordingError(f"{self.path}: cannot be read as a rosbag2 bag ({_one_line(e)})") from None
+        try:
+            for c in reader.connections:
+                self.channels[c.id] = _Channel(c.id, c.msgtype, c.topic, c.ext.serialization_format
+                                               if hasattr(c.ext, "serialization_format") else "cdr")
+            try:
+                for c, timestamp, data in reader.messages():
+                    self.last_time_ns = timestamp
+                    yield _Message(c.id, int(timestamp), memoryview(data))
+            except Exception as e:
+                raise RecordingError(f"{self.path}: rosbag2 bag damaged after {self.last_time_ns or 0} ns "
+                                     f"({type(e).__name__}: {_one_line(e)})") from None
+        finally:
+            reader.close()
+
+    @staticmethod
+    def decoder(channel: _Channel) -> Callable[[memoryview], object]:
+        store, convert, name = typestore(), CONVERTERS[channel.schema_name], channel.schema_name
+        return lambda data: convert(store.deserialize_cdr(bytes(data), name))
+
+
+def propose_topics(channels: dict[str, _Channel]) -> str | None:
+    """'--left-topic ... --right-calibration-topic ...' from the message types, or None.
+
+    Image (or CompressedImage) topics with a CameraInfo topic in their namespace or the one above
+    (/cam/left/image_raw or /cam/left/image_raw/compressed with /cam/left/camera_info). Per camera
+    the raw image is preferred (accum rectifies), then an uncompressed one, then the shortest name;
+    the camera whose namespace names "left" (else the first by name) is the left one.
+    """
+    infos = {t.rsplit("/", 1)[0]: t for t, c in channels.items() if c.schema_name == ROS_CAMERA_INFO}
+    cameras: dict[str, list] = {}
+    for topic, c in channels.items():
+        if c.schema_name not in ROS_IMAGE_TYPES:
+            continue
+        ns = topic.rsplit("/", 1)[0]
+        owner = ns if ns in infos else ns.rsplit("/", 1)[0] if ns.rsplit("/", 1)[0] in infos else None
+        if owner is not None:
+            rank = ("image_raw" not in topic, c.schema_name != ROS_IMAGE, len(topic), topic)
+            cameras.setdefault(owner, []).append((rank, topic))
+    if len(cameras) < 2:
+        return None
+    names = sorted(cameras, key=lambda ns: ("left" not in ns.lower(), ns))
+    left = names[0]
+    right = next((ns for ns in names[1:] if "right" in ns.lower()), names[1])
+    pick = {ns: min(cameras[ns])[1] for ns in (left, right)}
+    return (f"--left-topic {pick[left]} --right-topic {pick[right]} --left-calibration-topic {infos[left]} "
+            f"--right-calibration-topic {infos[right]}")
+
+
+# -- writing ------------------------------------------------------------------------------------
+@dataclass
+class RosMessage:
+    """A ROS 2 message ready to write: its type name, the rosbags object, and its CDR bytes."""
+
+    msgtype: str
+    message: object
+
+    @property
+    def cdr(self) -> bytes:
+        return bytes(typestore().serialize_cdr(self.message, self.msgtype))
+
+
+def _header(stamp, frame_id: str):
+    T = typestore().types
+    return T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=int(stamp.seconds),
+                                                                          nanosec=int(stamp.nanos)),
+                                    frame_id=frame_id)
+
+
+def _bytes(data: bytes) -> np.ndarray:
+    return np.frombuffer(data, np.uint8)
+
+
+def ros_from_foxglove(msg) -> RosMessage:
+    """The ROS 2 message of a Foxglove protobuf image, calibration or transform(s) message: the inverse
+    of the conversions in the module docstring (an unset timestamp becomes a zero stamp)."""
+    T = typestore().types
+    name = msg.DESCRIPTOR.full_name
+    if name == "foxglove.CompressedImage":
+        return RosMessage(ROS_COMPRESSED, T[ROS_COMPRESSED](header=_header(msg.timestamp, msg.frame_id),
+                                                            format=msg.format, data=_bytes(msg.data)))
+    if name == "foxglove.RawImage":
+        return RosMessage(ROS_IMAGE, T[ROS_IMAGE](header=_header(msg.timestamp, msg.frame_id), height=msg.height,
+                                                  width=msg.width, encoding=msg.encoding, is_bigendian=0,
+                                                  step=msg.step, data=_bytes(msg.data)))
+    if name == "foxglove.CameraCalibration":
+        roi = T["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
+        R = list(msg.R) if len(msg.R) == 9 else [1.0, 0, 0, 0, 1, 0, 0, 0, 1]
+        return RosMessage(ROS_CAMERA_INFO, T[ROS_CAMERA_INFO](
+            header=_header(msg.timestamp, msg.frame_id), height=msg.height, width=msg.width,
+            distortion_model=msg.distortion_model, d=np.array(msg.D, float), k=np.array(msg.K, float),
+            r=np.array(R, float), p=np.array(msg.P, float), binning_x=0, binning_y=0, roi=roi))
+    if name in ("foxglove.FrameTransform", "foxglove.FrameTransforms"):
+        stamped = []
+        for tf in (msg.transforms if name == "foxglove.FrameTransforms" else [msg]):
+            t, q = tf.translation, tf.rotation
+            stamped.append(T["geometry_msgs/msg/TransformStamped"](
+                header=_header(tf.timestamp, tf.parent_frame_id), child_frame_id=tf.child_frame_id,
+                transform=T["geometry_msgs/msg/Transform"](
+                    translation=T["geometry_msgs/msg/Vector3"](x=t.x, y=t.y, z=t.z),
+                    rotation=T["geometry_msgs/msg/Quaternion"](x=q.x, y=q.y, z=q.z, w=q.w))))
+        return RosMessage(ROS_TF, T[ROS_TF](transforms=stamped))
+    raise ValueError(f"no ROS 2 message for {name}")
+
+
+def convert_to_ros2(path: str, writer, topics=None) -> int:
+    """Write the calibration, image and transform messages of the protobuf MCAP ``path`` to ``writer``
+    (a ``RecordingWriter(..., ros2=True)`` or ``Rosbag2Writer``) as ROS 2 messages, same topics, same
+    log times, same bytes of image data; returns the number of messages written. ``topics``: the
+    ``reader.Topics`` (default names)."""
+    from ..logs import LimitedWarnings
+    from .reader import Recording, Topics
+
+    recording = Recording.__new__(Recording)  # only its scan: no validation of what is converted
+    recording.path, recording.topics, recording.bag = str(path), topics or Topics(), None
+    count = 0
+    with LimitedWarnings(log) as warn:
+        for topic, log_time, msg in recording._scan(warn, set(recording._roles())):
+            writer.ros_message(topic, ros_from_foxglove(msg), log_time)
+            count += 1
+    return count

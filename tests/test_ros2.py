@@ -1,0 +1,264 @@
+"""ROS 2 recordings in: MCAP with ros2msg/CDR, rosbag2 folders and bare .db3 files give the same models
+as the protobuf recording they were converted from."""
+
+from __future__ import annotations
+
+import glob
+import shutil
+
+import cv2
+import numpy as np
+import pytest
+
+from accumcli.errors import RecordingError
+from accumcli.recording import Recording, RecordingWriter, Rosbag2Writer, Topics
+from accumcli.recording.mcap_records import _Channel
+from accumcli.recording.messages import calibration_from_msg, decode_image
+from accumcli.recording.ros2 import (
+    ROS_CAMERA_INFO,
+    ROS_IMAGE,
+    RosMessage,
+    convert_to_ros2,
+    mcap_cdr_decoder,
+    typestore,
+)
+from accumcli.runs import FrameRange, RecordingOptions, accumulate_recording, describe_recording
+
+from . import helpers
+
+ROS_NAMES = {"/stereo/left/image": "/cam/left/image_raw", "/stereo/right/image": "/cam/right/image_raw",
+             "/stereo/left/calibration": "/cam/left/camera_info",
+             "/stereo/right/calibration": "/cam/right/camera_info"}
+ROS_TOPICS = Topics("/cam/left/image_raw", "/cam/right/image_raw", "/cam/left/camera_info", "/cam/right/camera_info")
+
+
+class _Renaming:
+    """A ROS 2 writer that puts each message on ``names[topic]`` (or ``topic``)."""
+
+    def __init__(self, writer, names):
+        self.writer, self.names = writer, names
+
+    def ros_message(self, topic, message, log_time):
+        self.writer.ros_message(self.names.get(topic, topic), message, log_time)
+
+
+def _forms(source: str, directory, names=None) -> dict[str, str]:
+    """The protobuf recording ``source`` as ROS 2 MCAP, rosbag2 folder and bare .db3 in ``directory``."""
+    names = names or {}
+    mcap, folder, bare = directory / "cdr.mcap", directory / "bag", directory / "bare.db3"
+    mcap_folder = directory / "mcapbag"
+    with RecordingWriter(mcap, ros2=True) as w:
+        convert_to_ros2(source, _Renaming(w, names))
+    for path, storage in ((folder, "sqlite3"), (mcap_folder, "mcap")):
+        with Rosbag2Writer(path, storage) as w:
+            convert_to_ros2(source, _Renaming(w, names))
+    shutil.copy(glob.glob(str(folder / "*.db3"))[0], bare)
+    return {"mcap-cdr": str(mcap), "folder": str(folder), "db3": str(bare), "mcap-folder": str(mcap_folder)}
+
+
+@pytest.fixture(scope="module")
+def ros_forms(small_recording, tmp_path_factory):
+    return _forms(small_recording, tmp_path_factory.mktemp("ros2"))
+
+
+@pytest.fixture(scope="module")
+def ros_named_forms(small_recording, tmp_path_factory):
+    return _forms(small_recording, tmp_path_factory.mktemp("ros2named"), ROS_NAMES)
+
+
+def _model_bytes(path, out, options=RecordingOptions()) -> bytes:
+    result = accumulate_recording(path, [str(out)], frames=FrameRange(0, 4), options=options)
+    assert result.frames == 4
+    return out.read_bytes()
+
+
+def test_ros2_forms_give_byte_identical_models(small_recording, ros_forms, ros_named_forms, tmp_path):
+    reference = _model_bytes(small_recording, tmp_path / "protobuf.json")
+    assert len(reference) > 1000
+    for kind, path in ros_forms.items():
+        assert _model_bytes(path, tmp_path / f"{kind}.json") == reference, kind
+    ros_options = RecordingOptions(topics=ROS_TOPICS)
+    for kind, path in ros_named_forms.items():
+        assert _model_bytes(path, tmp_path / f"named-{kind}.json", ros_options) == reference, kind
+
+
+def test_info_on_each_form(small_recording, ros_forms):
+    expected, _ = describe_recording(small_recording)
+    for kind, path in ros_forms.items():
+        summary, problem = describe_recording(path)
+        assert problem is None
+        assert summary.stereo_frames == expected.stereo_frames == 6
+        assert summary.frames_with_pose == 6 and summary.image_encoding == expected.image_encoding
+        assert summary.intrinsics == expected.intrinsics and summary.distortion_model == expected.distortion_model
+        types = {topic: schema for topic, schema, _ in summary.topics}
+        assert types["/stereo/left/image"] == "sensor_msgs/msg/CompressedImage", kind
+        assert types["/stereo/left/calibration"] == ROS_CAMERA_INFO and types["/tf"] == "tf2_msgs/msg/TFMessage"
+        assert [n for _, _, n in summary.topics] == [n for _, _, n in expected.topics]
+
+
+def test_missing_default_topics_propose_the_ros_topics(ros_named_forms):
+    proposal = ("try --left-topic /cam/left/image_raw --right-topic /cam/right/image_raw "
+                "--left-calibration-topic /cam/left/camera_info --right-calibration-topic /cam/right/camera_info")
+    for path in ros_named_forms.values():
+        with pytest.raises(RecordingError) as e:
+            describe_recording(path)
+        assert "missing topic /stereo/left/image; this recording looks like ROS 2: " + proposal in str(e.value)
+        assert "/cam/left/camera_info" in str(e.value).split("topics found:")[1]
+
+
+def test_proposal_prefers_raw_images_and_finds_compressed_ones(tmp_path):
+    path = tmp_path / "many.mcap"
+    with RecordingWriter(path, ros2=True) as w:
+        for side in ("right", "left"):   # right first: the left one is found by its name
+            w.calibration(f"/rig/{side}/camera_info", helpers.calibration(side), helpers.T0)
+            w.image(f"/rig/{side}/image_rect/compressed", helpers.image(0), helpers.T0, f"camera_{side}")
+            w.image(f"/rig/{side}/image_raw/compressed", helpers.image(0), helpers.T0, f"camera_{side}")
+        w.image("/mono/image_raw", helpers.image(0), helpers.T0, "mono")   # no CameraInfo sibling
+    with pytest.raises(RecordingError, match="try --left-topic /rig/left/image_raw/compressed --right-topic "
+                                             "/rig/right/image_raw/compressed --left-calibration-topic "
+                                             "/rig/left/camera_info --right-calibration-topic /rig/right/camera_info"):
+        Recording(path)
+
+
+def test_protobuf_recording_gets_no_ros_proposal(tmp_path):
+    path = helpers.write(tmp_path / "pb.mcap", skip_topics=("/stereo/left/image",))
+    with pytest.raises(RecordingError) as e:
+        Recording(path)
+    assert "missing topic /stereo/left/image (topics found" in str(e.value) and "ROS 2" not in str(e.value)
+
+
+def _write_raw_ros(writer, encoding: str, n=3, tf_topic="/tf"):
+    """A tiny ROS 2 recording whose images are sensor_msgs/msg/Image in ``encoding`` (written as mono8
+    content under that name) and with one transform per frame on ``tf_topic`` (one only on /tf_static)."""
+    from accumcli.recording.messages import image_to_msg
+    from accumcli.recording.ros2 import ros_from_foxglove
+
+    for side in ("left", "right"):
+        writer.calibration(f"/stereo/{side}/calibration", helpers.calibration(side), helpers.T0)
+    for i in range(n):
+        t = helpers.T0 + i * helpers.PERIOD
+        if tf_topic == "/tf" or i == 0:
+            writer.raw_transform("camera_left", "gripper", (0.01 * i, 0.0, 0.5), (0, 0, 0, 1), t, topic=tf_topic)
+        for side in ("left", "right"):
+            msg = image_to_msg(helpers.image(i), t, f"camera_{side}", "mono8")
+            msg.encoding = encoding
+            writer.ros_message(f"/stereo/{side}/image", ros_from_foxglove(msg), t)
+
+
+@pytest.mark.parametrize("form", ["mcap", "folder"])
+def test_bayer_is_refused_naming_the_encoding(tmp_path, form):
+    path = tmp_path / ("bayer.mcap" if form == "mcap" else "bayer")
+    with (RecordingWriter(path, ros2=True) if form == "mcap" else Rosbag2Writer(path)) as w:
+        _write_raw_ros(w, "bayer_rggb8")
+    refused = "/stereo/left/image: image encoding 'bayer_rggb8' \\(Bayer\\) is not supported"
+    with pytest.raises(RecordingError, match=refused):
+        Recording(path)
+
+
+def test_tf_static_is_static_forever(tmp_path):
+    path = tmp_path / "static"
+    with Rosbag2Writer(path) as w:
+        _write_raw_ros(w, "mono8", n=5, tf_topic="/tf_static")
+    with Recording(path) as rec:
+        frames = list(rec.frames())
+        assert len(frames) == 5
+        assert all(f.T_camera_object is not None and f.T_camera_object[2, 3] == 0.5 for f in frames)
+        assert rec.pose_at(helpers.T0 + 10**12)[2, 3] == 0.5   # 1000 s later: still the static transform
+        assert np.array_equal(frames[1].left.shape, (120, 160))
+
+
+def _cdr_roundtrip(msgtype: str, message):
+    """A ROS message serialised with rosbags and decoded by the MCAP-CDR path (mcap_ros2)."""
+    text = typestore().generate_msgdef(msgtype, ros_version=2)[0].encode()
+    decode = mcap_cdr_decoder(_Channel(1, msgtype, "/t", "cdr", 1, "ros2msg", text))
+    return decode(memoryview(RosMessage(msgtype, message).cdr))
+
+
+def _ros_image(pixels: np.ndarray, encoding: str, bigendian: bool = False):
+    T = typestore().types
+    header = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=3, nanosec=5), frame_id="c")
+    data = pixels.astype(pixels.dtype.newbyteorder(">" if bigendian else "<")).tobytes()
+    return T[ROS_IMAGE](header=header, height=pixels.shape[0], width=pixels.shape[1], encoding=encoding,
+                        is_bigendian=int(bigendian), step=len(data) // pixels.shape[0],
+                        data=np.frombuffer(data, np.uint8))
+
+
+def test_image_encodings_through_the_cdr_decoder():
+    rng = np.random.default_rng(4)
+    rgb = rng.integers(0, 256, (7, 9, 3), dtype=np.uint8)
+    grey_of_rgb = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
+    msg = _cdr_roundtrip(ROS_IMAGE, _ros_image(rgb, "rgb8"))
+    assert msg.timestamp.seconds == 3 and msg.timestamp.nanos == 5 and msg.frame_id == "c"
+    assert np.array_equal(decode_image(msg), grey_of_rgb)
+    assert np.array_equal(decode_image(_cdr_roundtrip(ROS_IMAGE, _ros_image(rgb[:, :, ::-1].copy(), "bgr8"))),
+                          grey_of_rgb)
+    mono = rng.integers(0, 256, (7, 9), dtype=np.uint8)
+    assert np.array_equal(decode_image(_cdr_roundtrip(ROS_IMAGE, _ros_image(mono, "mono8"))), mono)
+    deep = mono.astype(np.uint16) * 257   # 16-bit value v*257 scales back to exactly v
+    for bigendian in (False, True):
+        got = decode_image(_cdr_roundtrip(ROS_IMAGE, _ros_image(deep, "mono16", bigendian)))
+        assert np.array_equal(got, mono), bigendian
+
+
+@pytest.mark.parametrize("model,d", [("plumb_bob", [0.1, -0.05, 0.001, 0.002, 0.01]),
+                                     ("rational_polynomial", [0.1, -0.05, 0.001, 0.002, 0.01, 0.3, -0.2, 0.05])])
+def test_camera_info_lower_case_fields(model, d):
+    T = typestore().types
+    K = [500.0, 0, 320, 0, 510, 240, 0, 0, 1]
+    R = [1.0, 0, 0, 0, 1, 0, 0, 0, 1]
+    P = [505.0, 0, 322, -40.4, 0, 505, 241, 0, 0, 0, 1, 0]
+    info = T[ROS_CAMERA_INFO](
+        header=T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id="cam"),
+        height=480, width=640, distortion_model=model, d=np.array(d), k=np.array(K), r=np.array(R), p=np.array(P),
+        binning_x=0, binning_y=0,
+        roi=T["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False))
+    msg = _cdr_roundtrip(ROS_CAMERA_INFO, info)
+    assert not msg.HasField("timestamp")   # a zero stamp: the reader uses the log time
+    cal = calibration_from_msg(msg)
+    assert (cal.width, cal.height, cal.distortion_model, cal.frame_id) == (640, 480, model, "cam")
+    assert np.array_equal(cal.D, d) and np.array_equal(cal.K.ravel(), K) and np.array_equal(cal.P.ravel(), P)
+
+
+def test_a_topic_with_another_ros_type_is_an_error(tmp_path):
+    path = tmp_path / "wrong.mcap"
+    with RecordingWriter(path, ros2=True) as w:
+        _write_raw_ros(w, "mono8")
+        w.calibration("/stereo/left/image", helpers.calibration("left"), helpers.T0 + 10**9)
+    with pytest.raises(RecordingError, match="topic /stereo/left/image carries sensor_msgs/msg/CameraInfo"):
+        Recording(path)
+
+
+def test_directory_without_metadata_is_a_clear_error(tmp_path):
+    with pytest.raises(RecordingError, match="directory without metadata.yaml"):
+        Recording(tmp_path)
+
+
+def test_unusable_ros2msg_schema_is_a_one_line_error(tmp_path):
+    from mcap.writer import Writer
+
+    path = tmp_path / "badschema.mcap"
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start()
+        schema = w.register_schema(ROS_CAMERA_INFO, "ros2msg", b"float64[9 k\nnot a field\n")
+        channel = w.register_channel("/stereo/left/calibration", "cdr", schema)
+        w.add_message(channel, log_time=1, data=b"\x00\x01\x00\x00", publish_time=1)
+        w.finish()
+    with pytest.raises(RecordingError) as e:
+        Recording(path)
+    assert "topic /stereo/left/calibration carries sensor_msgs/msg/CameraInfo: its ros2msg schema cannot be " \
+           "parsed" in str(e.value) and "\n" not in str(e.value)
+
+
+def test_damaged_bags_are_one_line_errors(ros_forms, tmp_path):
+    folder = tmp_path / "bag"
+    shutil.copytree(ros_forms["folder"], folder)
+    (folder / "metadata.yaml").write_text("rosbag2_bagfile_information: [unclosed\n")
+    with pytest.raises(RecordingError, match="cannot be read as a rosbag2 bag") as e:
+        Recording(folder)
+    assert "\n" not in str(e.value)
+    half = tmp_path / "half.db3"
+    data = open(ros_forms["db3"], "rb").read()
+    half.write_bytes(data[:len(data) // 2])
+    with pytest.raises(RecordingError, match="half.db3: cannot be read as a rosbag2 bag"):
+        Recording(half)
