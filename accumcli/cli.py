@@ -140,13 +140,13 @@ def _wrote(paths) -> None:
     click.echo("wrote " + ", ".join(str(p) for p in paths))
 
 
-path_arg = functools.partial(click.argument, type=click.Path(dir_okay=False))
+recording_arg = functools.partial(click.argument, "recording", type=click.Path())   # a file or a rosbag2 folder
 output_option = functools.partial(click.option, "-o", "--output", type=click.Path(dir_okay=False))
 
 
 # -- info -----------------------------------------------------------------------------------------
 @command()
-@path_arg("recording")
+@recording_arg()
 @recording_options
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 def info(recording, options, as_json):
@@ -231,7 +231,7 @@ def simulate(output, count, size, scene, shape, seed, size_mm, distance, contras
 
 # -- extract -------------------------------------------------------------------------------------
 @command()
-@path_arg("recording")
+@recording_arg()
 @output_option(required=True, help="Frames file to write (JSON lines, one stereo frame per line).")
 @click.option("--rrd", type=click.Path(dir_okay=False),
               help="Also save a Rerun recording of each frame's images, 2D and 3D segments.")
@@ -263,7 +263,7 @@ def extract(recording, output, rrd, with_2d, workers, frames, extract_params, op
 
 # -- accumulate ----------------------------------------------------------------------------------
 @command()
-@path_arg("recording")
+@recording_arg()
 @output_option("outputs", multiple=True, required=True,
                help="Model to write: .json (the model), .ply (line set) and/or .mcap (Foxglove SceneUpdate over "
                     "time); repeatable.")
@@ -322,7 +322,7 @@ def accumulate(recording, outputs, ply_all, rrd, truth, history, plot, png, pane
 # -- track -----------------------------------------------------------------------------------------
 @command()
 @click.argument("model_file", metavar="MODEL.json", type=click.Path(dir_okay=False, exists=True))
-@path_arg("recording")
+@recording_arg()
 @output_option("outputs", multiple=True, required=True,
                help="Poses to write: .json (accum.poses/1), .tum (for evo) and/or .mcap (FrameTransforms for "
                     "Foxglove); repeatable.")
@@ -366,7 +366,7 @@ def track(model_file, recording, outputs, init_pose, rrd, reacquire, poses_topic
 
 # -- view ------------------------------------------------------------------------------------------
 @command()
-@click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False, exists=True))
+@click.argument("inputs", nargs=-1, required=True, type=click.Path(exists=True))
 @click.option("--rrd", type=click.Path(dir_okay=False), help="Save a Rerun recording.")
 @click.option("--spawn", is_flag=True, help="Open the Rerun viewer (where one can run).")
 @click.option("--connect", metavar="URL", help="Send to a running viewer, e.g. rerun+http://127.0.0.1:9876/proxy.")
@@ -399,7 +399,7 @@ def view(inputs, rrd, spawn, connect, png, png_frame, frames, options):
 
 # -- batch -----------------------------------------------------------------------------------------
 @command()
-@click.argument("recordings", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.argument("recordings", nargs=-1, required=True, type=click.Path())
 @output_option("outdir", required=True, type=click.Path(file_okay=False), help="Folder of the results.")
 @click.option("--track", is_flag=True, help="Also track each model through its recording (poses.json).")
 @click.option("--truth-from-sidecar", is_flag=True, help="Evaluate each model against NAME.truth.json beside it.")

@@ -15,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import json
 import math
+import os
 import re
 from dataclasses import dataclass, field
 from typing import Iterable, Iterator
@@ -36,7 +37,7 @@ TRACKED_SUFFIX = "_tracked"
 # file_kind results and how messages name them
 KIND_NAMES = {"model": f"a model JSON ({MODEL_FORMAT})", "frames": f"a frames JSONL file ({MODEL_FORMAT} lines)",
               "poses": f"a poses JSON ({POSES_FORMAT})", "truth": f"a truth JSON ({TRUTH_FORMAT})",
-              "ply": "a PLY file", "recording": "an MCAP recording", "json": "a JSON file of another kind",
+              "ply": "a PLY file", "recording": "a recording (MCAP or rosbag2)", "json": "a JSON file of another kind",
               "text": "a text file", "binary": "a binary file", "empty": "an empty file"}
 SNIFF_BYTES = 65536
 
@@ -117,11 +118,14 @@ def _is_text(head: bytes) -> bool:
 
 
 def _sniff(path) -> tuple[str, str | None]:
-    """(kind, the format tag if a JSON file has one)."""
+    """(kind, the format tag if a JSON file has one). A recording is an MCAP file, a rosbag2
+    ``.db3`` (SQLite) file or a rosbag2 folder (with its metadata.yaml)."""
+    if os.path.isdir(path) and os.path.isfile(os.path.join(path, "metadata.yaml")):
+        return "recording", None
     head = _head(path)
     if not head.strip():
         return "empty", None
-    if head.startswith(b"\x89MCAP"):
+    if head.startswith((b"\x89MCAP", b"SQLite format 3\0")):
         return "recording", None
     if head.startswith((b"ply\n", b"ply\r\n")):
         return "ply", None

@@ -26,7 +26,9 @@ def info_lines(summary, object_frame: str, camera_frame: str) -> list[str]:
     lines += [f"             {count} frame(s): {reason}" for reason, count in summary.pose_problems]
     lines.append(f"tf frames    {', '.join(summary.tf_frames) or 'none'}")
     lines.append("topics")
-    lines += [f"  {topic:<32} {schema:<28} {count if count is not None else '?':>6}"
+    width = max([32] + [len(topic) + 1 for topic, _, _ in summary.topics])
+    kinds = max([28] + [len(schema) + 1 for _, schema, _ in summary.topics])
+    lines += [f"  {topic:<{width}} {schema:<{kinds}} {count if count is not None else '?':>6}"
               for topic, schema, count in summary.topics]
     return lines
 

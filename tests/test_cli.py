@@ -247,3 +247,18 @@ def test_an_interrupt_leaves_the_previous_output_and_no_temporary(tmp_path, sign
     assert process.returncode == 130, err
     assert err.strip().splitlines()[-1] == "error: interrupted" and "Traceback" not in err
     assert model.read_text() == "previous" and os.listdir(tmp_path) == ["m.json"]
+
+
+def test_a_rosbag2_folder_is_a_recording_for_every_command(small_recording, tmp_path):
+    from accumcli.recording import Rosbag2Writer
+    from accumcli.recording.ros2 import convert_to_ros2
+
+    bag = tmp_path / "bag"
+    with Rosbag2Writer(bag) as writer:
+        convert_to_ros2(small_recording, writer)
+    info = run("info", bag)
+    assert info.exit_code == 0 and "6 stereo frames" in info.output and "sensor_msgs/msg/CompressedImage" in info.output
+    assert run("accumulate", bag, "-o", tmp_path / "m.json", "--frames", "0:2").exit_code == 0
+    assert run("accumulate", small_recording, "-o", tmp_path / "p.json", "--frames", "0:2").exit_code == 0
+    assert (tmp_path / "m.json").read_bytes() == (tmp_path / "p.json").read_bytes()
+    assert run("view", bag, tmp_path / "m.json", "--png", tmp_path / "v.png").exit_code == 0
