@@ -51,6 +51,7 @@ sys.path.insert(0, str(ROOT))
 from accumcli.errors import AccumError  # noqa: E402
 from accumcli.geometry import make_transform, quat_from_transform  # noqa: E402
 from accumcli.recording import CameraCalibration  # noqa: E402
+from accumcli.recording.calibration import MAX_PIXELS  # noqa: E402
 from accumcli.recording.messages import calibration_to_msg, image_to_msg, to_stamp, transform_to_msg  # noqa: E402
 
 T0 = 1_750_000_000 * 1_000_000_000
@@ -238,7 +239,7 @@ def m_png_bomb(rng, kw):
     size = [(20000, 20000), (16384, 1024), (4000, 4000), (5000, 5000), (160, 120)][int(rng.integers(5))]
     data = png_bomb(*size)
     kw["encoding"] = "png"
-    if rng.random() < 0.3 and size[0] * size[1] <= 1 << 24:
+    if rng.random() < 0.3 and size[0] * size[1] <= MAX_PIXELS:
         kw["width"], kw["height"] = size  # the calibration agrees: a large but legal image
     _chain(kw, "image_edit", lambda side, i, msg: (setattr(msg, "data", data), msg)[1]
            if hasattr(msg, "format") else msg)
@@ -565,7 +566,7 @@ CORPUS = {  # name: (class, expected outcome, how to make it)
                      lambda p: build(p, right_cal=calibration("right", baseline=float("nan")))),
     "png_header_100000": ("7 a PNG header declaring 100000 x 100000", "warning: size 100000x100000 is outside",
                           lambda p: build(p, image_edit=_image(1, lambda m: png_with_size(m, 100000, 100000)))),
-    "png_bomb": ("7 a PNG bomb (16 Mpx of zeros in 16 KB)", "warning: image size 4000x4000 differs",
+    "png_bomb": ("7 a PNG bomb (16 Mpx of zeros in 16 KB)", "warning: image header: size 4000x4000 exceeds the limit",
                  lambda p: build(p, image_edit=_image(1, _bomb))),
     "corrupt_png": ("7 libpng error on the terminal", "warning: libpng error",
                     lambda p: build(p, image_edit=_image(2, _corrupt_png))),

@@ -23,7 +23,8 @@ from ..errors import RecordingError
 SUPPORTED_DISTORTION = {"plumb_bob", "rational_polynomial", ""}
 DISTORTION_LENGTHS = (0, 4, 5, 8, 12, 14)
 MAX_SIDE = 16384          # pixels, width or height of an image or calibration
-MAX_PIXELS = 1 << 24      # width * height (16.8 Mpx, e.g. 4096 x 4096)
+MAX_PIXELS = 3840 * 2160  # width * height (8.3 Mpx, 4K UHD): extraction needs ~120 bytes a pixel of a pair,
+                          # so a larger pair would take more than 1 GB (and the fuzz limit is 2 GB)
 
 
 def size_problem(width: int, height: int) -> str | None:
@@ -31,7 +32,7 @@ def size_problem(width: int, height: int) -> str | None:
     if not (1 <= width <= MAX_SIDE and 1 <= height <= MAX_SIDE):
         return f"size {width}x{height} is outside 1..{MAX_SIDE} pixels"
     if width * height > MAX_PIXELS:
-        return f"size {width}x{height} exceeds the limit of {MAX_PIXELS / 1e6:.1f} Mpx"
+        return f"size {width}x{height} exceeds the limit of {MAX_PIXELS / 1e6:.1f} Mpx (4K UHD); downscale the images"
     return None
 
 
