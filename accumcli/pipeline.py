@@ -106,6 +106,7 @@ class LineAccumulation:
         estimate = refine_pose(model, frame, T_recorded, p.track, gradients=extraction.gradients)
         self.times.add("tracking", t0)
         rotation, translation = pose_error(estimate.T_camera_object, T_recorded)
+        # only a verified pose moves the recorded one: never an 'ambiguous' or 'lost' refinement
         if estimate.status != "tracked" or rotation > p.max_correction_deg or translation > p.max_correction_m:
             return T_recorded, estimate
         self.T_recorded_model.append(invert(T_recorded) @ estimate.T_camera_object)
