@@ -17,18 +17,23 @@ into both rectified images, lie on image edges:
   visible model's centroid) over the signed point-to-line distances in both images, each point taking,
   at every iteration, the candidate nearest its current projection (parallel
   edges a few pixels apart are common: the strongest is often the wrong one),
-  Tukey-weighted (``tukey_px``), coarse to fine: each level searches again at
-  the current pose with a smaller range.
+  Tukey-weighted (``tukey_px``), coarse to fine: each level searches again from the best pose so
+  far and its result is kept only if it verifies better (a wide search can jump to clutter).
 
-A pose is ``tracked`` when at least ``min_inliers`` points (and
-``min_inlier_fraction`` of those measured) end within ``inlier_px`` and their
-RMS distance is at most ``max_rms_px``; otherwise ``lost``.
+Verification (``_verify``, measured afresh at the finest search): a pose is ``tracked`` when at
+least ``min_inliers`` distances (and ``min_inlier_fraction`` of those measured) end within
+``inlier_px``, their RMS is at most ``max_rms_px``, and the coverage (the share of the visible
+model's sample points on an edge in both images, i.e. at the pose's disparity) is at least
+``min_coverage``; otherwise ``lost``. The tracker then compares the candidate poses of a frame
+(``decide``): a verified pose whose coverage exceeds that of a distinct verified alternative by less
+than ``min_margin`` is ``ambiguous`` and keeps the alternatives. Every estimate carries its
+figures and the standard deviations of its last Gauss-Newton step (``PoseEstimate.figures``).
 
 ``PoseTracker`` follows a sequence. It refines from both the constant-velocity
 prediction and the last pose (the better wins: an object swung back and forth
 turns back between frames); when the prediction's refinement is not tracked, also
 from the last pose with a wide search (``reacquire_search_px``; not on a
-re-acquisition). Whenever the best of these is lost, and
+re-acquisition). Whenever none of these is verified, and
 always when there is no tracked frame yet or the last one is more than
 ``max_gap_s`` ago (snapshots, not video: no prediction holds), it re-acquires by
 RANSAC over 3D-3D segment correspondences (``ransac_pose``). The angle and the distance
@@ -36,8 +41,10 @@ between the lines of two segments are invariant under rigid motion, so pairs
 of the frame's extracted segments are matched to model pairs with the same
 invariants; each match proposes a pose, the few distinct poses that bring the
 most model segments onto extracted ones are refined on the images, and the
-best refined one wins if enough model segments find a 3D counterpart there
-(``min_support_fraction``).
+refined ones count only if enough model segments find a 3D counterpart there
+(``min_support_fraction``); the model's near-symmetries (``PoseTracker.symmetries``) applied to the
+best one are refined too, so that a symmetric model is ``ambiguous`` rather than wrongly ``tracked``.
+A re-acquisition that verifies nothing returns no pose.
 """
 
 from __future__ import annotations
