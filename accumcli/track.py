@@ -56,7 +56,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .geometry import (check_points, check_transform, invert, make_transform, pose_error, quat_from_transform,
-                       rotate_vectors, rotation_about_point, transform_points)
+                       rotate_vectors, rotation_about_point, transform_from_quat, transform_points)
 from .lines2d import Gradients, LineParams, frame_gradients, parabola_peak, sample
 from .recording import StereoFrame, StereoIntrinsics
 from .segments import Segments
@@ -83,7 +83,8 @@ class TrackParams:
     ransac_hypotheses: int = 5               # distinct RANSAC poses refined on the images
     reacquire_tukey_px: tuple = (32.0, 20.0, 12.0, 6.0, 4.0, 2.5)
     blur_sigma: float = 1.0                  # of the images before their gradients, px
-    min_coverage: float = 0.4                # of the visible model's points on an edge in both images
+    level_slack: float = 0.05                # a level's pose is kept unless its coverage falls by more
+    min_coverage: float = 0.5                # of the visible model's points on an edge in both images
     min_margin: float = 0.1                  # coverage over the best distinct alternative pose, else ambiguous
     distinct_deg: float = 3.0                # poses further apart than this (or distinct_m) are alternatives
     distinct_m: float = 0.005
@@ -234,10 +235,10 @@ def refine_pose(model: Segments, frame: StereoFrame, T_init: np.ndarray, params:
     segments. ``gradients``: the frame's (left, right) ``Gradients`` if already computed (e.g.
     ``extract_frame(...).gradients``); used when their ``blur_sigma`` is ``params.blur_sigma``.
 
-    Coarse to fine, each level (``search_px``, ``tukey_px``) starts from the best pose so far, which
-    is the level's result only if its verification (``_verify`` at the finest search) ranks higher
-    (``_rank``) than that of the pose it started from: a wide search that jumps to clutter cannot
-    spoil a good start. A 'lost' estimate that found nothing better (too little in view, too few
+    Coarse to fine, each level (``search_px``, ``tukey_px``) starts from the pose kept so far; the
+    level's result is kept unless its verification (``_verify`` at the finest search) turns
+    'tracked' into 'lost' or its coverage falls more than ``level_slack`` under the best seen: a
+    wide search that jumps to clutter cannot spoil a good start. A 'lost' estimate that found nothing better (too little in view, too few
     edges) keeps ``T_init``. Raises ``InputError`` if ``T_init`` is not a rigid transform."""
     T_init = check_transform(T_init, "T_init (T_camera_object)")
     intr = frame.intrinsics
@@ -245,12 +246,13 @@ def refine_pose(model: Segments, frame: StereoFrame, T_init: np.ndarray, params:
     accepted = model.select(model.accepted) if len(model) else model
     search_px, tukey_px = search_px or params.search_px, tukey_px or params.tukey_px
     best = _verify_at(accepted, T_init, intr, grads, search_px[-1], tukey_px[-1], params)
+    peak = best.coverage
     for search, tukey in zip(search_px, tukey_px):
         T = _gauss_newton(accepted, best.T_camera_object, intr, grads, search, tukey, params)
         if T is not None:
             found = _verify_at(accepted, T, intr, grads, search_px[-1], tukey_px[-1], params)
-            if _rank(found) > _rank(best):
-                best = found
+            if (found.status == "tracked") >= (best.status == "tracked") and found.coverage >= peak - params.level_slack:
+                best, peak = found, max(peak, found.coverage)
     return best
 
 
@@ -289,7 +291,12 @@ def _gauss_newton(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, gra
         T = rotation_about_point(step[:3], pivot, step[3:]) @ T
         if np.linalg.norm(step[:3]) < 1e-5 and np.linalg.norm(step[3:]) < 1e-6:
             break
-    return T
+    return _rigid(T)
+
+
+def _rigid(T: np.ndarray) -> np.ndarray:
+    """``T`` with its rotation made exactly orthonormal again (products of many increments drift)."""
+    return transform_from_quat(*quat_from_transform(T))
 
 
 def _verify_at(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, grads, search: float, tukey: float,
@@ -533,15 +540,16 @@ class PoseTracker:
     def symmetries(self) -> list[np.ndarray]:
         """The model's near-symmetries: rigid transforms S (4, 4), object frame, more than
         ``distinct_deg`` / ``distinct_m`` from the identity, that bring at least half of the accepted
-        segments onto accepted segments (``ransac_pose`` of the model onto itself; computed once).
+        segments onto accepted segments (``ransac_pose`` of the model onto itself; computed once),
+        and their inverses.
         A re-acquired pose T also tries T S: the images must tell them apart, or it is 'ambiguous'."""
         if self._symmetries is None:
             accepted = self.model.select(self.model.accepted)
             found = ransac_pose(self.model, accepted, keep=self.params.ransac_hypotheses + 1) if len(accepted) else None
             identity = PoseEstimate(np.eye(4), 0.0, 0, 0, "")
-            self._symmetries = [T for T, support in (found.hypotheses if found else [])
-                                if support >= 0.5 * len(accepted) and
-                                _distinct(PoseEstimate(T, 0.0, 0, 0, ""), identity, self.params)]
+            found = [T for T, support in (found.hypotheses if found else [])
+                     if support >= 0.5 * len(accepted) and _distinct(PoseEstimate(T, 0.0, 0, 0, ""), identity, self.params)]
+            self._symmetries = found + [invert(T) for T in found]      # a shift by one square and back
         return self._symmetries
 
     def predict(self) -> list[np.ndarray]:
@@ -552,7 +560,7 @@ class PoseTracker:
         if len(self.history) == 1:
             return [self.history[-1]]
         previous, last = self.history[-2], self.history[-1]
-        return [(last @ invert(previous)) @ last, last]
+        return [_rigid((last @ invert(previous)) @ last), last]
 
     def update(self, frame: StereoFrame, T_guess: np.ndarray | None = None,
                observe: Callable[[], Segments] | None = None,
