@@ -22,16 +22,17 @@ into both rectified images, lie on image edges:
 
 Verification (``_verify``, measured afresh at the finest search): a pose is ``tracked`` when at
 least ``min_inliers`` distances (and ``min_inlier_fraction`` of those measured) end within
-``inlier_px``, their RMS is at most ``max_rms_px``, and the coverage (the share of the visible
+``inlier_px``, their RMS is at most ``max_rms_px``, the last Gauss-Newton step's standard deviations
+are at most ``max_std_deg`` and ``max_std_mm`` on every axis, and the coverage (the share of the visible
 model's sample points on an edge in both images, i.e. at the pose's disparity) is at least
 ``min_coverage``; otherwise ``lost``. The tracker then compares the candidate poses of a frame
 (``decide``): a verified pose whose coverage exceeds that of a distinct verified alternative by less
 than ``min_margin`` is ``ambiguous`` and keeps the alternatives. Every estimate carries its
 figures and the standard deviations of its last Gauss-Newton step (``PoseEstimate.figures``).
 
-``PoseTracker`` follows a sequence. It refines from both the constant-velocity
-prediction and the last pose (the better wins: an object swung back and forth
-turns back between frames); when the prediction's refinement is not tracked, also
+``PoseTracker`` follows a sequence. It refines from the constant-velocity
+prediction and, when that does not verify, from the last pose (an object swung back and forth
+turns back between frames); when neither verifies, also
 from the last pose with a wide search (``reacquire_search_px``; not on a
 re-acquisition). Whenever none of these is verified, and
 always when there is no tracked frame yet or the last one is more than
@@ -83,8 +84,11 @@ class TrackParams:
     ransac_hypotheses: int = 5               # distinct RANSAC poses refined on the images
     reacquire_tukey_px: tuple = (32.0, 20.0, 12.0, 6.0, 4.0, 2.5)
     blur_sigma: float = 1.0                  # of the images before their gradients, px
+    fine_start_px: float = 12.0              # a start that verifies skips the wider levels
     level_slack: float = 0.05                # a level's pose is kept unless its coverage falls by more
     min_coverage: float = 0.5                # of the visible model's points on an edge in both images
+    max_std_deg: float = 0.3                 # of the last Gauss-Newton step, per axis: the pose is determined
+    max_std_mm: float = 1.0
     min_margin: float = 0.1                  # coverage over the best distinct alternative pose, else ambiguous
     distinct_deg: float = 3.0                # poses further apart than this (or distinct_m) are alternatives
     distinct_m: float = 0.005
@@ -238,7 +242,8 @@ def refine_pose(model: Segments, frame: StereoFrame, T_init: np.ndarray, params:
     Coarse to fine, each level (``search_px``, ``tukey_px``) starts from the pose kept so far; the
     level's result is kept unless its verification (``_verify`` at the finest search) turns
     'tracked' into 'lost' or its coverage falls more than ``level_slack`` under the best seen: a
-    wide search that jumps to clutter cannot spoil a good start. A 'lost' estimate that found nothing better (too little in view, too few
+    wide search that jumps to clutter cannot spoil a good start. A start that verifies already runs
+    only the levels searching at most ``fine_start_px``. A 'lost' estimate that found nothing better (too little in view, too few
     edges) keeps ``T_init``. Raises ``InputError`` if ``T_init`` is not a rigid transform."""
     T_init = check_transform(T_init, "T_init (T_camera_object)")
     intr = frame.intrinsics
@@ -247,7 +252,10 @@ def refine_pose(model: Segments, frame: StereoFrame, T_init: np.ndarray, params:
     search_px, tukey_px = search_px or params.search_px, tukey_px or params.tukey_px
     best = _verify_at(accepted, T_init, intr, grads, search_px[-1], tukey_px[-1], params)
     peak = best.coverage
-    for search, tukey in zip(search_px, tukey_px):
+    levels = list(zip(search_px, tukey_px))
+    if best.status == "tracked":      # the start verifies: only the fine levels (at most fine_start_px)
+        levels = [(s, t) for s, t in levels if s <= params.fine_start_px] or levels[-1:]
+    for search, tukey in levels:
         T = _gauss_newton(accepted, best.T_camera_object, intr, grads, search, tukey, params)
         if T is not None:
             found = _verify_at(accepted, T, intr, grads, search_px[-1], tukey_px[-1], params)
@@ -350,6 +358,11 @@ def _verify(T: np.ndarray, points_obj: np.ndarray, measurements, intr: StereoInt
         failed.append(f"RMS {rms:.2f} px (needs <= {params.max_rms_px})")
     if not coverage >= params.min_coverage:
         failed.append(f"coverage {coverage:.2f} in both images (needs {params.min_coverage})")
+    if std_rotation is None:
+        failed.append("the pose is not determined (singular Gauss-Newton system)")
+    elif not (std_rotation.max() <= params.max_std_deg and std_translation.max() <= params.max_std_mm):
+        failed.append(f"standard deviation {std_rotation.max():.2f} deg, {std_translation.max():.2f} mm "
+                      f"(needs <= {params.max_std_deg} deg, {params.max_std_mm} mm)")
     return PoseEstimate(T, rms, int(inliers.sum()), len(r), "lost" if failed else "tracked", reason=", ".join(failed),
                         coverage=coverage, std_rotation_deg=std_rotation, std_translation_mm=std_translation)
 
@@ -545,7 +558,7 @@ class PoseTracker:
         A re-acquired pose T also tries T S: the images must tell them apart, or it is 'ambiguous'."""
         if self._symmetries is None:
             accepted = self.model.select(self.model.accepted)
-            found = ransac_pose(self.model, accepted, keep=self.params.ransac_hypotheses + 1) if len(accepted) else None
+            found = ransac_pose(self.model, accepted, keep=2 * self.params.ransac_hypotheses + 1) if len(accepted) else None
             identity = PoseEstimate(np.eye(4), 0.0, 0, 0, "")
             found = [T for T, support in (found.hypotheses if found else [])
                      if support >= 0.5 * len(accepted) and _distinct(PoseEstimate(T, 0.0, 0, 0, ""), identity, self.params)]
@@ -590,8 +603,11 @@ class PoseTracker:
         gap = None if self.last_time_ns is None else (frame.timestamp_ns - self.last_time_ns) * 1e-9
         reacquiring = T_guess is None and (not self.history or gap is None or gap > p.max_gap_s)
         guesses = [T_guess] if T_guess is not None else self.predict()
-        candidates = [refine_pose(self.model, frame, guess, p, grads) for guess in guesses]
-        if not reacquiring and candidates and candidates[0].status != "tracked" and self.history:
+        candidates = []
+        for guess in guesses:   # the last pose only when the prediction does not verify
+            if not any(c.status == "tracked" for c in candidates):
+                candidates.append(refine_pose(self.model, frame, guess, p, grads))
+        if not reacquiring and candidates and not any(c.status == "tracked" for c in candidates) and self.history:
             wide = refine_pose(self.model, frame, self.history[-1], p, grads, p.reacquire_search_px,
                                p.reacquire_tukey_px)
             wide.method = "wide"
