@@ -30,9 +30,10 @@ model's sample points on an edge in both images, i.e. at the pose's disparity) i
 than ``min_margin`` is ``ambiguous`` and keeps the alternatives. Every estimate carries its
 figures and the standard deviations of its last Gauss-Newton step (``PoseEstimate.figures``).
 
-``PoseTracker`` follows a sequence. It refines from the constant-velocity
-prediction and, when that does not verify, from the last pose (an object swung back and forth
-turns back between frames); when neither verifies, also
+``PoseTracker`` follows a sequence. It refines from both the constant-velocity
+prediction and the last pose (an object swung back and forth turns back between frames; trying
+only the last pose when the prediction verifies let small drifts through on dev_steps_track);
+when neither verifies, also
 from the last pose with a wide search (``reacquire_search_px``; not on a
 re-acquisition). Whenever none of these is verified, and
 always when there is no tracked frame yet or the last one is more than
@@ -603,10 +604,8 @@ class PoseTracker:
         gap = None if self.last_time_ns is None else (frame.timestamp_ns - self.last_time_ns) * 1e-9
         reacquiring = T_guess is None and (not self.history or gap is None or gap > p.max_gap_s)
         guesses = [T_guess] if T_guess is not None else self.predict()
-        candidates = []
-        for guess in guesses:   # the last pose only when the prediction does not verify
-            if not any(c.status == "tracked" for c in candidates):
-                candidates.append(refine_pose(self.model, frame, guess, p, grads))
+        # from both: the one that verifies better wins (decide)
+        candidates = [refine_pose(self.model, frame, guess, p, grads) for guess in guesses]
         if not reacquiring and candidates and not any(c.status == "tracked" for c in candidates) and self.history:
             wide = refine_pose(self.model, frame, self.history[-1], p, grads, p.reacquire_search_px,
                                p.reacquire_tukey_px)

@@ -307,3 +307,14 @@ def test_tracked_motion_keeps_the_recorded_pose_unless_the_refinement_is_tracked
     for step in steps[1:]:
         expected = moved[step.frame.index] if step.frame.index % 2 == 0 else step.frame.T_camera_object
         assert np.array_equal(step.T_camera_object, expected)
+
+
+def test_track_recording_tracks_with_the_parameters_it_is_given(noisy_pair, model_of_exact):
+    from accumcli.runs import FrameRange, track_recording
+    from accumcli.track import TrackParams
+
+    exact, _ = noisy_pair
+    assert track_recording(model_of_exact, exact, frames=FrameRange(0, 3)).tracked == 3
+    strict = track_recording(model_of_exact, exact, frames=FrameRange(0, 3), params=TrackParams(min_coverage=1.01),
+                             reacquire=False)
+    assert strict.track.status == ["lost"] * 3 and "coverage" in strict.track.extra[0]["reason"]

@@ -70,7 +70,7 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
     if init_pose is not None:
         init_pose = check_transform(init_pose, "init_pose")
     files = OutputSet([*outputs, rrd])
-    tracker = PoseTracker(model)
+    tracker = PoseTracker(model, params)
     times, poses, status, extra, trajectory = [], [], [], [], []
     t0 = time.perf_counter()
     with options.open(recording, require_pose=init_pose is None) as rec, files:
