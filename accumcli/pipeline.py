@@ -95,17 +95,21 @@ class LineAccumulation:
     def _refined(self, frame: StereoFrame, T_recorded: np.ndarray,
                  extraction: FrameSegments) -> tuple[np.ndarray, PoseEstimate | None]:
         p = self.params
+        track = p.track
         model = to_model(self.core.entities, self.core.confidence, self.core.observations, uncertainty=False)
         if model.accepted.sum() < p.min_tracking_segments:
             # bootstrap: until enough segments are accepted, refine against the tentative ones too
-            # (the background among them does not follow the object and falls to the robust weights)
+            # (the background among them does not follow the object and falls to the robust weights;
+            # it lowers the coverage, so that check waits for the accepted model, the others stay)
             model.confidence = np.maximum(model.confidence, 0.5)
+            track = replace(track, min_coverage=0.0)
             if len(model) < p.min_tracking_segments:
                 return T_recorded, None
         t0 = time.perf_counter()
-        estimate = refine_pose(model, frame, T_recorded, p.track, gradients=extraction.gradients)
+        estimate = refine_pose(model, frame, T_recorded, track, gradients=extraction.gradients)
         self.times.add("tracking", t0)
         rotation, translation = pose_error(estimate.T_camera_object, T_recorded)
+        # only a verified pose moves the recorded one: never an 'ambiguous' or 'lost' refinement
         if estimate.status != "tracked" or rotation > p.max_correction_deg or translation > p.max_correction_m:
             return T_recorded, estimate
         self.T_recorded_model.append(invert(T_recorded) @ estimate.T_camera_object)

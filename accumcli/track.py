@@ -17,18 +17,25 @@ into both rectified images, lie on image edges:
   visible model's centroid) over the signed point-to-line distances in both images, each point taking,
   at every iteration, the candidate nearest its current projection (parallel
   edges a few pixels apart are common: the strongest is often the wrong one),
-  Tukey-weighted (``tukey_px``), coarse to fine: each level searches again at
-  the current pose with a smaller range.
+  Tukey-weighted (``tukey_px``), coarse to fine: each level searches again from the best pose so
+  far and its result is kept only if it verifies better (a wide search can jump to clutter).
 
-A pose is ``tracked`` when at least ``min_inliers`` points (and
-``min_inlier_fraction`` of those measured) end within ``inlier_px`` and their
-RMS distance is at most ``max_rms_px``; otherwise ``lost``.
+Verification (``_verify``, measured afresh at the finest search): a pose is ``tracked`` when at
+least ``min_inliers`` distances (and ``min_inlier_fraction`` of those measured) end within
+``inlier_px``, their RMS is at most ``max_rms_px``, the last Gauss-Newton step's standard deviations
+are at most ``max_std_deg`` and ``max_std_mm`` on every axis, and the coverage (the share of the visible
+model's sample points on an edge in both images, i.e. at the pose's disparity) is at least
+``min_coverage``; otherwise ``lost``. The tracker then compares the candidate poses of a frame
+(``decide``): a verified pose whose coverage exceeds that of a distinct verified alternative by less
+than ``min_margin`` is ``ambiguous`` and keeps the alternatives. Every estimate carries its
+figures and the standard deviations of its last Gauss-Newton step (``PoseEstimate.figures``).
 
 ``PoseTracker`` follows a sequence. It refines from both the constant-velocity
-prediction and the last pose (the better wins: an object swung back and forth
-turns back between frames); when the prediction's refinement is not tracked, also
+prediction and the last pose (an object swung back and forth turns back between frames; trying
+only the last pose when the prediction verifies let small drifts through on dev_steps_track);
+when neither verifies, also
 from the last pose with a wide search (``reacquire_search_px``; not on a
-re-acquisition). Whenever the best of these is lost, and
+re-acquisition). Whenever none of these is verified, and
 always when there is no tracked frame yet or the last one is more than
 ``max_gap_s`` ago (snapshots, not video: no prediction holds), it re-acquires by
 RANSAC over 3D-3D segment correspondences (``ransac_pose``). The angle and the distance
@@ -36,8 +43,10 @@ between the lines of two segments are invariant under rigid motion, so pairs
 of the frame's extracted segments are matched to model pairs with the same
 invariants; each match proposes a pose, the few distinct poses that bring the
 most model segments onto extracted ones are refined on the images, and the
-best refined one wins if enough model segments find a 3D counterpart there
-(``min_support_fraction``).
+refined ones count only if enough model segments find a 3D counterpart there
+(``min_support_fraction``); the model's near-symmetries (``PoseTracker.symmetries``) applied to the
+best one are refined too, so that a symmetric model is ``ambiguous`` rather than wrongly ``tracked``.
+A re-acquisition that verifies nothing returns no pose.
 """
 
 from __future__ import annotations
@@ -48,8 +57,8 @@ from typing import Callable
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .geometry import (check_points, check_transform, invert, make_transform, pose_error, rotate_vectors,
-                       rotation_about_point, transform_points)
+from .geometry import (check_points, check_transform, invert, make_transform, pose_error, quat_from_transform,
+                       rotate_vectors, rotation_about_point, transform_from_quat, transform_points)
 from .lines2d import Gradients, LineParams, frame_gradients, parabola_peak, sample
 from .recording import StereoFrame, StereoIntrinsics
 from .segments import Segments
@@ -68,21 +77,37 @@ class TrackParams:
     aspect_margin_deg: float = 25.0
     inlier_px: float = 1.5
     min_inliers: int = 30
-    min_inlier_fraction: float = 0.3
-    max_rms_px: float = 1.2
+    min_inlier_fraction: float = 0.9
+    max_rms_px: float = 0.6
     reacquire_search_px: tuple = (64.0, 40.0, 24.0, 12.0, 6.0, 3.0)
     max_gap_s: float = 0.5                   # longer gaps between tracked frames: re-acquire
     min_support_fraction: float = 0.2        # of visible model segments with a 3D counterpart, on re-acquisition
     ransac_hypotheses: int = 5               # distinct RANSAC poses refined on the images
     reacquire_tukey_px: tuple = (32.0, 20.0, 12.0, 6.0, 4.0, 2.5)
     blur_sigma: float = 1.0                  # of the images before their gradients, px
+    fine_start_px: float = 12.0              # a start that verifies skips the wider levels
+    level_slack: float = 0.05                # a level's pose is kept unless its coverage falls by more
+    min_coverage: float = 0.5                # of the visible model's points on an edge in both images
+    max_std_deg: float = 0.3                 # of the last Gauss-Newton step, per axis: the pose is determined
+    max_std_mm: float = 1.0
+    min_margin: float = 0.1                  # coverage over the best distinct alternative pose, else ambiguous
+    distinct_deg: float = 3.0                # poses further apart than this (or distinct_m) are alternatives
+    distinct_m: float = 0.005
 
 
 @dataclass
 class PoseEstimate:
     """T_camera_object (4, 4); residual: RMS distance of the inliers, px; inliers / measured
-    points; status 'tracked' or 'lost'; how it was found ('refined', 'wide', 'ransac'); reason:
-    why it is 'lost' ('' when tracked)."""
+    distances (a point counts once per image where it found an edge); coverage: the share of
+    the visible model's sample points within ``inlier_px`` of an edge in both images (the left and
+    right projections of one 3D point, so with the disparity of the pose); status 'tracked',
+    'ambiguous' or 'lost'; how it was found ('refined', 'wide', 'ransac'); reason: why it is not
+    'tracked' ('' when it is); margin: coverage minus that of the best distinct alternative pose
+    (NaN until the tracker compares them); std_rotation_deg (3,), std_translation_mm (3,): standard
+    deviations of the final Gauss-Newton step's increment (rotation about the visible model's
+    centroid and translation, camera frame), None when it could not be computed; alternatives:
+    [(T_camera_object (4, 4), coverage)] the poses it could not tell apart from this one
+    (status 'ambiguous')."""
 
     T_camera_object: np.ndarray
     residual_px: float
@@ -91,6 +116,34 @@ class PoseEstimate:
     status: str
     method: str = "refined"
     reason: str = ""
+    coverage: float = 0.0
+    margin: float = float("nan")
+    std_rotation_deg: np.ndarray | None = None
+    std_translation_mm: np.ndarray | None = None
+    alternatives: list = field(default_factory=list)
+
+    def figures(self) -> dict:
+        """The estimate's figures as JSON-ready extra fields of a poses.json entry."""
+        def number(value, digits=4):
+            return round(float(value), digits) if value is not None and np.isfinite(value) else None
+
+        out = {"residual_px": number(self.residual_px), "inliers": self.inliers, "measured": self.measured,
+               "coverage": number(self.coverage), "margin": number(self.margin), "method": self.method}
+        if self.std_rotation_deg is not None:
+            out["std_rotation_deg"] = [number(v, 5) for v in self.std_rotation_deg]
+            out["std_translation_mm"] = [number(v, 5) for v in self.std_translation_mm]
+        if self.alternatives:
+            out["candidates"] = [{**_pose_fields(T), "coverage": number(c)} for T, c in self.alternatives]
+        if self.reason:
+            out["reason"] = self.reason
+        return out
+
+
+def _pose_fields(T: np.ndarray) -> dict:
+    """translation (m) and rotation_xyzw of a (4, 4) transform, rounded to 9 digits (as poses.json)."""
+    translation, quat = quat_from_transform(T)
+    return {"translation": [round(float(v), 9) for v in translation],
+            "rotation_xyzw": [round(float(v), 9) for v in quat]}
 
 
 def model_samples(model: Segments, per_segment: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -186,46 +239,117 @@ def refine_pose(model: Segments, frame: StereoFrame, T_init: np.ndarray, params:
     """Refine ``T_init`` (T_camera_object, (4, 4)) on the frame's images against the model's accepted
     segments. ``gradients``: the frame's (left, right) ``Gradients`` if already computed (e.g.
     ``extract_frame(...).gradients``); used when their ``blur_sigma`` is ``params.blur_sigma``.
-    A 'lost' estimate that stopped early (too little in view, too few edges) keeps ``T_init``.
-    Raises ``InputError`` if ``T_init`` is not a rigid transform."""
+
+    Coarse to fine, each level (``search_px``, ``tukey_px``) starts from the pose kept so far; the
+    level's result is kept unless its verification (``_verify`` at the finest search) turns
+    'tracked' into 'lost' or its coverage falls more than ``level_slack`` under the best seen: a
+    wide search that jumps to clutter cannot spoil a good start. A start that verifies already runs
+    only the levels searching at most ``fine_start_px``. A 'lost' estimate that found nothing better (too little in view, too few
+    edges) keeps ``T_init``. Raises ``InputError`` if ``T_init`` is not a rigid transform."""
     T_init = check_transform(T_init, "T_init (T_camera_object)")
     intr = frame.intrinsics
     grads = _gradients(frame, params, gradients)
     accepted = model.select(model.accepted) if len(model) else model
-    T = T_init.copy()
     search_px, tukey_px = search_px or params.search_px, tukey_px or params.tukey_px
-    points_obj = dirs_obj = None
-    for search, tukey in zip(search_px, tukey_px):
-        keep = visible(accepted, T, intr, params.aspect_margin_deg)
-        if keep.sum() < 3:
-            return PoseEstimate(T_init.copy(), float("inf"), 0, 0, "lost",
-                                reason=f"{int(keep.sum())} accepted model segments in view (needs 3)")
-        points_obj, dirs_obj, _ = model_samples(accepted.select(keep), params.samples_per_segment)
+    best = _verify_at(accepted, T_init, intr, grads, search_px[-1], tukey_px[-1], params)
+    peak = best.coverage
+    levels = list(zip(search_px, tukey_px))
+    if best.status == "tracked":      # the start verifies: only the fine levels (at most fine_start_px)
+        levels = [(s, t) for s, t in levels if s <= params.fine_start_px] or levels[-1:]
+    for search, tukey in levels:
+        T = _gauss_newton(accepted, best.T_camera_object, intr, grads, search, tukey, params)
+        if T is not None:
+            found = _verify_at(accepted, T, intr, grads, search_px[-1], tukey_px[-1], params)
+            if (found.status == "tracked") >= (best.status == "tracked") and found.coverage >= peak - params.level_slack:
+                best, peak = found, max(peak, found.coverage)
+    return best
+
+
+def _samples_in_view(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, params: TrackParams):
+    """Sample points (S, 3) and directions (S, 3), object frame, of the accepted segments in view at
+    ``T``, or None when fewer than 3 segments are."""
+    keep = visible(accepted, T, intr, params.aspect_margin_deg)
+    if keep.sum() < 3:
+        return None
+    points, dirs, _ = model_samples(accepted.select(keep), params.samples_per_segment)
+    return points, dirs
+
+
+def _gauss_newton(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, grads, search: float, tukey: float,
+                  params: TrackParams) -> np.ndarray | None:
+    """One level: measure at ``T`` within ``search`` px, then ``iterations_per_level`` Tukey-weighted
+    Gauss-Newton steps over both images; the new pose, or None when too little is in view or found."""
+    samples = _samples_in_view(accepted, T, intr, params)
+    if samples is None:
+        return None
+    points_obj, dirs_obj = samples
+    measurements = _measure(transform_points(T, points_obj), rotate_vectors(T, dirs_obj), intr, grads, search, params)
+    for _ in range(params.iterations_per_level):
         P = transform_points(T, points_obj)
-        D = rotate_vectors(T, dirs_obj)
-        measurements = _measure(P, D, intr, grads, search, params)
-        for _ in range(params.iterations_per_level):
-            P = transform_points(T, points_obj)
-            pivot = P.mean(axis=0)  # rotating about the object, not the camera, decouples the increments
-            J_all, r_all = [], []
-            for side, (r, found, normal) in enumerate(_residuals(P, measurements, intr)):
-                J_all.append(_jacobian(P, normal, intr, side, pivot)[found])
-                r_all.append(r[found])
-            J, r = np.vstack(J_all), np.concatenate(r_all)
-            if len(r) < 6:
-                return PoseEstimate(T_init.copy(), float("inf"), 0, len(r), "lost",
-                                    reason=f"{len(r)} model points found an image edge (needs 6)")
-            w = np.where(np.abs(r) < tukey, (1 - (r / tukey) ** 2) ** 2, 0.0)
-            H = (J * w[:, None]).T @ J + 1e-6 * np.eye(6)
-            step = np.linalg.solve(H, -(J * w[:, None]).T @ r)
-            T = rotation_about_point(step[:3], pivot, step[3:]) @ T
-            if np.linalg.norm(step[:3]) < 1e-5 and np.linalg.norm(step[3:]) < 1e-6:
-                break
-    # final residuals at the final pose, against the finest measurements
+        pivot = P.mean(axis=0)  # rotating about the object, not the camera, decouples the increments
+        J_all, r_all = [], []
+        for side, (r, found, normal) in enumerate(_residuals(P, measurements, intr)):
+            J_all.append(_jacobian(P, normal, intr, side, pivot)[found])
+            r_all.append(r[found])
+        J, r = np.vstack(J_all), np.concatenate(r_all)
+        if len(r) < 6:
+            return None
+        w = np.where(np.abs(r) < tukey, (1 - (r / tukey) ** 2) ** 2, 0.0)
+        H = (J * w[:, None]).T @ J + 1e-6 * np.eye(6)
+        step = np.linalg.solve(H, -(J * w[:, None]).T @ r)
+        T = rotation_about_point(step[:3], pivot, step[3:]) @ T
+        if np.linalg.norm(step[:3]) < 1e-5 and np.linalg.norm(step[3:]) < 1e-6:
+            break
+    return _rigid(T)
+
+
+def _rigid(T: np.ndarray) -> np.ndarray:
+    """``T`` with its rotation made exactly orthonormal again (products of many increments drift)."""
+    return transform_from_quat(*quat_from_transform(T))
+
+
+def _verify_at(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, grads, search: float, tukey: float,
+               params: TrackParams) -> PoseEstimate:
+    """The estimate of pose ``T`` measured afresh within ``search`` px (``_verify``); 'lost' with
+    the reason when fewer than 3 segments are in view or fewer than 6 points find an edge."""
+    samples = _samples_in_view(accepted, T, intr, params)
+    if samples is None:
+        n = int(visible(accepted, T, intr, params.aspect_margin_deg).sum())
+        return PoseEstimate(T.copy(), float("inf"), 0, 0, "lost", reason=f"{n} accepted model segments in view (needs 3)")
+    points_obj, dirs_obj = samples
+    measurements = _measure(transform_points(T, points_obj), rotate_vectors(T, dirs_obj), intr, grads, search, params)
+    found = sum(int(np.sum(~np.isnan(c).all(axis=1))) for _, _, c in measurements)
+    if found < 6:
+        return PoseEstimate(T.copy(), float("inf"), 0, found, "lost",
+                            reason=f"{found} model points found an image edge (needs 6)")
+    return _verify(T, points_obj, measurements, intr, tukey, params)
+
+
+def _verify(T: np.ndarray, points_obj: np.ndarray, measurements, intr: StereoIntrinsics, tukey: float,
+            params: TrackParams) -> PoseEstimate:
+    """The estimate at the final pose ``T`` against the finest level's measurements: inliers, RMS,
+    coverage (both images), the standard deviations of the last Gauss-Newton increment
+    (``sigma^2 (J^T W J)^-1``, sigma^2 the Tukey-weighted residual variance with 6 degrees of freedom
+    removed) and the status of this one pose ('tracked' or 'lost'; the tracker may make it
+    'ambiguous')."""
     P = transform_points(T, points_obj)
-    r = np.abs(np.concatenate([res[found] for res, found, _ in _residuals(P, measurements, intr)]))
+    pivot = P.mean(axis=0)
+    per_side = _residuals(P, measurements, intr)
+    near = [found & (np.abs(r) <= params.inlier_px) for r, found, _ in per_side]
+    coverage = float(np.mean(near[0] & near[1]))
+    r = np.abs(np.concatenate([res[found] for res, found, _ in per_side]))
     inliers = r <= params.inlier_px
     rms = float(np.sqrt(np.mean(r[inliers] ** 2))) if inliers.any() else float("inf")
+    J = np.vstack([_jacobian(P, normal, intr, side, pivot)[found] for side, (_, found, normal) in enumerate(per_side)])
+    signed = np.concatenate([res[found] for res, found, _ in per_side])
+    w = np.where(np.abs(signed) < tukey, (1 - (signed / tukey) ** 2) ** 2, 0.0)
+    std_rotation = std_translation = None
+    if w.sum() > 6:
+        H = (J * w[:, None]).T @ J
+        sigma2 = float(np.sum(w * signed ** 2) / (w.sum() - 6))
+        if np.linalg.cond(H) < 1e12:
+            std = np.sqrt(np.maximum(np.diag(np.linalg.inv(H)) * sigma2, 0.0))
+            std_rotation, std_translation = np.degrees(std[:3]), std[3:] * 1000
     failed = []
     if not inliers.sum() >= params.min_inliers:
         failed.append(f"{int(inliers.sum())} inliers (needs {params.min_inliers})")
@@ -233,8 +357,15 @@ def refine_pose(model: Segments, frame: StereoFrame, T_init: np.ndarray, params:
         failed.append(f"inlier fraction {inliers.mean():.2f} (needs {params.min_inlier_fraction})")
     if not rms <= params.max_rms_px:
         failed.append(f"RMS {rms:.2f} px (needs <= {params.max_rms_px})")
-    return PoseEstimate(T, rms, int(inliers.sum()), len(r), "lost" if failed else "tracked",
-                        reason=", ".join(failed))
+    if not coverage >= params.min_coverage:
+        failed.append(f"coverage {coverage:.2f} in both images (needs {params.min_coverage})")
+    if std_rotation is None:
+        failed.append("the pose is not determined (singular Gauss-Newton system)")
+    elif not (std_rotation.max() <= params.max_std_deg and std_translation.max() <= params.max_std_mm):
+        failed.append(f"standard deviation {std_rotation.max():.2f} deg, {std_translation.max():.2f} mm "
+                      f"(needs <= {params.max_std_deg} deg, {params.max_std_mm} mm)")
+    return PoseEstimate(T, rms, int(inliers.sum()), len(r), "lost" if failed else "tracked", reason=", ".join(failed),
+                        coverage=coverage, std_rotation_deg=std_rotation, std_translation_mm=std_translation)
 
 
 # -- re-acquisition by RANSAC over 3D-3D segment pairs -------------------------------------------------
@@ -368,8 +499,43 @@ def _align(model_dirs, model_mid, frame_dirs, frame_mid):
 
 
 def _rank(estimate: PoseEstimate) -> tuple:
-    """Order of estimates: tracked first, then more inliers (in steps of 5%), then a lower residual."""
-    return (estimate.status == "tracked", round(np.log1p(estimate.inliers) / np.log(1.05)), -estimate.residual_px)
+    """Order of estimates: verified ('tracked') first, then a higher coverage (in steps of 0.02), more
+    inliers (in steps of 5%), a lower residual."""
+    return (estimate.status == "tracked", round(estimate.coverage / 0.02),
+            round(np.log1p(estimate.inliers) / np.log(1.05)), -estimate.residual_px)
+
+
+def _distinct(a: PoseEstimate, b: PoseEstimate, params: TrackParams) -> bool:
+    """Whether two estimates' poses are more than ``distinct_deg`` or ``distinct_m`` apart."""
+    rotation, translation = pose_error(a.T_camera_object, b.T_camera_object)
+    return rotation > params.distinct_deg or translation > params.distinct_m
+
+
+def decide(candidates: list[PoseEstimate], params: TrackParams = TrackParams()) -> PoseEstimate | None:
+    """The best of ``candidates`` (by ``_rank``; None if none has a finite pose) with its ``margin``:
+    its coverage minus that of the best verified candidate at a distinct pose (more than
+    ``distinct_deg`` or ``distinct_m`` away; 0 when there is none). A verified best whose margin is
+    under ``min_margin`` is 'ambiguous', the verified distinct poses within the margin in its
+    ``alternatives``: the images cannot tell them apart (a symmetric model, e.g. the chessboard's
+    half turn)."""
+    finite = [c for c in candidates if np.isfinite(c.T_camera_object).all()]
+    if not finite:
+        return None
+    ranked = sorted(finite, key=_rank, reverse=True)
+    best = ranked[0]
+    rivals = []
+    for other in ranked[1:]:
+        if other.status == "tracked" and all(_distinct(other, known, params) for known in [best, *rivals]):
+            rivals.append(other)
+    best.margin = best.coverage - max((r.coverage for r in rivals), default=0.0)
+    close = [r for r in rivals if best.coverage - r.coverage < params.min_margin]
+    if best.status == "tracked" and close:
+        rotation, translation = pose_error(close[0].T_camera_object, best.T_camera_object)
+        best.status = "ambiguous"
+        best.alternatives = [(r.T_camera_object, r.coverage) for r in close]
+        best.reason = (f"a pose {rotation:.0f} deg and {translation * 1000:.0f} mm away covers "
+                       f"{close[0].coverage:.2f} (this one {best.coverage:.2f}; margin needs {params.min_margin})")
+    return best
 
 
 @dataclass
@@ -383,6 +549,22 @@ class PoseTracker:
 
     def __post_init__(self):
         check_points(self.model.centers, "model segment centres")
+        self._symmetries = None
+
+    def symmetries(self) -> list[np.ndarray]:
+        """The model's near-symmetries: rigid transforms S (4, 4), object frame, more than
+        ``distinct_deg`` / ``distinct_m`` from the identity, that bring at least half of the accepted
+        segments onto accepted segments (``ransac_pose`` of the model onto itself; computed once),
+        and their inverses.
+        A re-acquired pose T also tries T S: the images must tell them apart, or it is 'ambiguous'."""
+        if self._symmetries is None:
+            accepted = self.model.select(self.model.accepted)
+            found = ransac_pose(self.model, accepted, keep=2 * self.params.ransac_hypotheses + 1) if len(accepted) else None
+            identity = PoseEstimate(np.eye(4), 0.0, 0, 0, "")
+            found = [T for T, support in (found.hypotheses if found else [])
+                     if support >= 0.5 * len(accepted) and _distinct(PoseEstimate(T, 0.0, 0, 0, ""), identity, self.params)]
+            self._symmetries = found + [invert(T) for T in found]      # a shift by one square and back
+        return self._symmetries
 
     def predict(self) -> list[np.ndarray]:
         """Starting poses: constant velocity in the camera frame, and the last pose (the motion may
@@ -392,7 +574,7 @@ class PoseTracker:
         if len(self.history) == 1:
             return [self.history[-1]]
         previous, last = self.history[-2], self.history[-1]
-        return [(last @ invert(previous)) @ last, last]
+        return [_rigid((last @ invert(previous)) @ last), last]
 
     def update(self, frame: StereoFrame, T_guess: np.ndarray | None = None,
                observe: Callable[[], Segments] | None = None,
@@ -404,54 +586,70 @@ class PoseTracker:
         the frame's gradients are computed once).
 
         When the motion since the last tracked frame is unknown (no guess and no tracked frame yet,
-        or a gap longer than ``max_gap_s``: snapshots rather than video), or when the refinements
-        end lost, the frame is a re-acquisition (given ``observe``): the refinements and those from
-        the RANSAC poses compete, judged by 3D support (model segments landing on the frame's
-        extracted segments), since a wrong local minimum in a cluttered image can still find
-        plenty of edges. A failure is never raised: the estimate is 'lost', with its ``reason``.
-        Raises ``InputError`` if ``T_guess`` is not a rigid transform.
+        or a gap longer than ``max_gap_s``: snapshots rather than video), or when no refinement is
+        verified, the frame is a re-acquisition (given ``observe``): the RANSAC poses are refined on
+        the images too, and every verified candidate must also have 3D support (at least
+        ``min_support_fraction`` of the model segments in view land on the frame's extracted
+        segments: a wrong local minimum in a cluttered image can still find plenty of edges). Then
+        ``decide`` picks the best candidate and its margin over the others ('ambiguous' when a
+        distinct one is about as good). A re-acquisition that verifies nothing returns no pose (NaN);
+        a lost refinement without re-acquisition keeps its pose. A failure is never raised: the
+        estimate is 'lost', with its ``reason``. Raises ``InputError`` if ``T_guess`` is not a rigid
+        transform.
         """
+        p = self.params
         if T_guess is not None:
             T_guess = check_transform(T_guess, "T_guess (T_camera_object)")
-        grads = _gradients(frame, self.params, gradients)
+        grads = _gradients(frame, p, gradients)
         gap = None if self.last_time_ns is None else (frame.timestamp_ns - self.last_time_ns) * 1e-9
-        reacquiring = T_guess is None and (not self.history or gap is None or gap > self.params.max_gap_s)
+        reacquiring = T_guess is None and (not self.history or gap is None or gap > p.max_gap_s)
         guesses = [T_guess] if T_guess is not None else self.predict()
-        candidates = [refine_pose(self.model, frame, guess, self.params, grads) for guess in guesses]
-        if not reacquiring and candidates and candidates[0].status != "tracked" and self.history:
-            wide = refine_pose(self.model, frame, self.history[-1], self.params, grads,
-                               self.params.reacquire_search_px, self.params.reacquire_tukey_px)
+        # from both: the one that verifies better wins (decide)
+        candidates = [refine_pose(self.model, frame, guess, p, grads) for guess in guesses]
+        if not reacquiring and candidates and not any(c.status == "tracked" for c in candidates) and self.history:
+            wide = refine_pose(self.model, frame, self.history[-1], p, grads, p.reacquire_search_px,
+                               p.reacquire_tukey_px)
             wide.method = "wide"
             candidates.append(wide)
-        best = max(candidates, key=_rank) if candidates else None
         reacquisition = "" if observe is not None else "no re-acquisition (nothing to observe)"
-        if (reacquiring or best is None or best.status != "tracked") and observe is not None:
+        ran = False
+        if (reacquiring or not any(c.status == "tracked" for c in candidates)) and observe is not None:
+            ran = True
             observed = observe()
-            ransac = ransac_pose(self.model, observed, keep=self.params.ransac_hypotheses)
+            ransac = ransac_pose(self.model, observed, keep=p.ransac_hypotheses)
             for T, _ in ransac.hypotheses:
-                found = refine_pose(self.model, frame, T, self.params, grads, self.params.reacquire_search_px[1:],
-                                    self.params.reacquire_tukey_px[1:])
+                found = refine_pose(self.model, frame, T, p, grads, p.reacquire_search_px[1:],
+                                    p.reacquire_tukey_px[1:])
                 found.method = "ransac"
                 candidates.append(found)
+            verified = [c for c in candidates if c.status == "tracked"]
+            for c in sorted(verified, key=_rank, reverse=True)[:1]:    # the best one's symmetric twins
+                for S in self.symmetries():
+                    mirrored = refine_pose(self.model, frame, c.T_camera_object @ S, p, grads, p.search_px[2:],
+                                           p.tukey_px[2:])
+                    mirrored.method = "symmetry"
+                    candidates.append(mirrored)
             accepted = self.model.select(self.model.accepted)
             tree = cKDTree(observed.centers) if len(observed) else None
-            scored = [(support_3d(accepted, observed, c.T_camera_object, tree), c) for c in candidates
-                      if np.isfinite(c.T_camera_object).all()]
-            if scored:
-                support, best = max(scored, key=lambda item: (item[1].status == "tracked", *_rank(item[1])[1:]))
-                visible_count = visible(accepted, best.T_camera_object, frame.intrinsics,
-                                        self.params.aspect_margin_deg).sum()
-                if support < self.params.min_support_fraction * max(visible_count, 1):
-                    best.status = "lost"
-                    best.reason = best.reason or (f"{support} of {visible_count} model segments in view found a "
-                                                  f"3D counterpart (needs {self.params.min_support_fraction:.0%})")
+            for c in candidates:
+                if c.status != "tracked":
+                    continue
+                support = support_3d(accepted, observed, c.T_camera_object, tree)
+                in_view = int(visible(accepted, c.T_camera_object, frame.intrinsics, p.aspect_margin_deg).sum())
+                if support < p.min_support_fraction * max(in_view, 1):
+                    c.status = "lost"
+                    c.reason = (f"{support} of {in_view} model segments in view found a 3D counterpart "
+                                f"(needs {p.min_support_fraction:.0%})")
             if ransac.reason:
                 reacquisition = f"re-acquisition: {ransac.reason}"
+        best = decide(candidates, p)
         if best is None:
             best = PoseEstimate(np.full((4, 4), np.nan), float("inf"), 0, 0, "lost",
                                 reason="no pose to start from (no guess, no tracked frame before)")
         if best.status != "tracked" and reacquisition:
             best.reason = f"{best.reason}; {reacquisition}" if best.reason else reacquisition
+        if best.status == "lost" and ran:
+            best.T_camera_object = np.full((4, 4), np.nan)     # a re-acquisition returns a verified pose or none
         if best.status == "tracked":
             self.history = (self.history + [best.T_camera_object])[-2:]
             self.last_time_ns = frame.timestamp_ns

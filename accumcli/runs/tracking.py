@@ -22,8 +22,8 @@ from .frame_logs import rerun_log
 
 @dataclass
 class TrackingResult:
-    """The poses (``track``: T_camera_object per frame with status and figures), the wall time and
-    the files written."""
+    """The poses (``track``: T_camera_object per frame with status 'tracked', 'ambiguous' or 'lost' and
+    the figures of ``PoseEstimate.figures`` as extra fields), the wall time and the files written."""
 
     track: PoseTrack
     seconds: float = 0.0
@@ -70,7 +70,7 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
     if init_pose is not None:
         init_pose = check_transform(init_pose, "init_pose")
     files = OutputSet([*outputs, rrd])
-    tracker = PoseTracker(model)
+    tracker = PoseTracker(model, params)
     times, poses, status, extra, trajectory = [], [], [], [], []
     t0 = time.perf_counter()
     with options.open(recording, require_pose=init_pose is None) as rec, files:
@@ -90,9 +90,7 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
                 times.append(frame.timestamp_ns)
                 poses.append(estimate.T_camera_object)
                 status.append(estimate.status)
-                extra.append({"residual_px": round(estimate.residual_px, 4) if np.isfinite(estimate.residual_px)
-                              else None, "inliers": estimate.inliers, "method": estimate.method,
-                              **({"reason": estimate.reason} if estimate.reason else {})})
+                extra.append(estimate.figures())
                 if estimate.status == "tracked":
                     trajectory.append(estimate.T_camera_object[:3, 3])
                 if viz:
