@@ -205,7 +205,7 @@ def simulate(output, count, size, scene, shape, seed, size_mm, distance, contras
     \b
     Examples:
       accum simulate -o out/rec.mcap --seed 3 --count 12
-      accum simulate -o out/t.mcap --shape T --clutter --noise 2 --count 24
+      accum simulate -o out/t.mcap --shape T --clutter --noise 2 --count 4
     """
     from .simulation import SimulationOptions
     from .simulation import simulate as run
@@ -416,8 +416,9 @@ def batch(recordings, outdir, track, truth_from_sidecar, workers, ray_address, f
     skips the recordings whose outputs are complete for the same inputs and options.
 
     \b
-    Example:
-      accum batch recordings/*.mcap -o out/batch --truth-from-sidecar --workers 2
+    Examples:
+      accum batch sample_data/sim_box.mcap -o out/batch --truth-from-sidecar --frames 0:4
+      accum batch recordings/*.mcap -o out/batch --track --workers 2 --ray local
     """
     from .batch import BatchOptions, run_batch, table_lines
     from .pipeline import AccumulateParams
