@@ -104,13 +104,13 @@ def test_track_command_writes_poses_json_and_mcap(noisy_pair, tmp_path):
     assert doc["format"] == "accum.poses/1" and doc["child_frame_id"] == "gripper" and len(doc["poses"]) == 16
     with open(poses_mcap, "rb") as f:
         messages = list(make_reader(f).iter_messages(topics=["/accum/poses"]))
-    assert len(messages) == sum(p["status"] == "tracked" for p in doc["poses"]) >= 14
+    assert len(messages) == sum(p["status"] == "tracked" for p in doc["poses"]) >= 12   # 3/4 of the frames
     assert messages[0][1].topic == "/accum/poses"   # beside the recording's /tf, not on it
     assert {"coverage", "margin", "inliers", "residual_px", "std_translation_mm"} <= set(doc["poses"][1])
     figures = json.loads(runner.invoke(main, ["eval", "--poses", str(poses_json),
                                               exact.replace(".mcap", ".truth.json"), "--json"]).output)
-    assert figures["tracked_fraction"] >= 0.85 and figures["median_rotation_deg"] < 0.5
-    assert figures["median_translation_mm"] < 2.0
+    assert figures["tracked_fraction"] >= 0.75 and figures["median_rotation_deg"] < 0.5
+    assert figures["median_translation_mm"] < 2.0 and figures["max_rotation_deg"] < 3.0   # tracked means right
     bad = runner.invoke(main, ["track", str(model), exact, "-o", str(tmp_path / "p.json"), "--init", "1,2,3"])
     assert bad.exit_code == 1 and "x,y,z,qx,qy,qz,qw" in bad.output
 
