@@ -97,6 +97,11 @@ def test_accumulate_then_eval(small_recording, tmp_path):
     result = run("accumulate", small_recording, "-o", model, "-o", ply, "--truth", truth, "--history", history)
     assert result.exit_code == 0, result.output
     assert model.exists() and ply.exists() and len(history.read_text().splitlines()) == 6
+
+    def refuse(constant):
+        raise ValueError(f"bare {constant} is not JSON")
+    rows = [json.loads(line, parse_constant=refuse) for line in history.read_text().splitlines()]
+    assert rows[0]["precision"] is None   # no accepted segment after one frame: null, never NaN
     figures = json.loads(run("eval", model, truth, "--json").output)
     assert figures["accepted"] > 20 and figures["precision"] > 0.85 and figures["background"] < 0.05
 
