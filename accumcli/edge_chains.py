@@ -1,0 +1,140 @@
+"""2D local segments from linked edge chains (``--detector chains``): fine-scale, junction-aware
+line support for short and crowded edges.
+
+The Hough detector (``lines2d``) orients each edge pixel by the structure tensor smoothed over
+``tensor_sigma`` px, which a neighbouring edge 2 px away biases by several degrees, and then needs
+a line's votes to pile up in a +-3 deg window: short and crowded edges are lost. Here:
+
+1. Edge pixels are Canny's, at sub-pixel position (``lines2d.edge_points``). Each is oriented by
+   its own Sobel gradient (on the image blurred by ``blur_sigma``), never by a smoothed tensor.
+2. Chains: two 8-neighbouring edge pixels are linked when their gradients agree in direction
+   (same polarity, within ``chain_angle_deg``). Connected components of the links are the chains;
+   a corner or a junction (where the orientation jumps) and a polarity flip end a chain.
+3. Straight pieces: a chain whose pixels lie farther than ``chain_max_residual_px`` from its
+   weighted total-least-squares line is split at the point of largest deviation, repeatedly
+   (``chain_splits`` rounds), so a chain bending gradually is split at its bend.
+4. Each straight chain is a line of ``lines2d.local_segments``: runs of support along it are cut
+   into local pieces of at most ``segment_length_px`` (a run shorter than that gives one piece of
+   its own length), fitted to the sub-pixel points, ends extended to meeting lines' corners,
+   refined on the gradient. ``line_id`` is the chain and ``t`` the position along it, so stereo
+   matching can propagate along the chain.
+
+Choice where the task is vague: chains are linked by gradient agreement between neighbours, not
+traced pixel by pixel, so linking is vectorised (one sparse connected-components call).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from .lines2d import (EdgePoints, Gradients, LineParams, Segments2D, StageTimes, _weighted_line_fit, edge_points,
+                      local_segments, refine_on_gradient)
+
+CHAIN_ANGLE_DEG = 20.0        # neighbouring edge pixels link when their gradients differ less than this
+CHAIN_MAX_RESIDUAL_PX = 0.6   # a chain's pixels farther than this from its line split it
+CHAIN_SPLITS = 8              # rounds of splitting
+
+
+def chain_links(points: EdgePoints, shape: tuple[int, int]) -> np.ndarray:
+    """(E, 2) index pairs of 8-neighbouring edge points whose gradients agree (same polarity,
+    directions within ``CHAIN_ANGLE_DEG``), each pair once."""
+    h, w = shape
+    m = len(points.mag)
+    index = np.full((h + 2, w + 2), -1, np.int64)   # padded: neighbours of border pixels are -1
+    rows, cols = points.pixel[:, 0] + 1, points.pixel[:, 1] + 1
+    index[rows, cols] = np.arange(m)
+    unit = points.g / points.mag[:, None]
+    cos_max = np.cos(np.radians(CHAIN_ANGLE_DEG))
+    links = [np.zeros((0, 2), np.int64)]
+    for dr, dc in ((0, 1), (1, -1), (1, 0), (1, 1)):
+        j = index[rows + dr, cols + dc]
+        i = np.nonzero(j >= 0)[0]
+        j = j[i]
+        agree = np.sum(unit[i] * unit[j], axis=1) >= cos_max
+        links.append(np.column_stack([i[agree], j[agree]]))
+    return np.concatenate(links)
+
+
+def _components(links: np.ndarray, nodes: np.ndarray, m: int) -> np.ndarray:
+    """(len(nodes),) label 0..K-1 of the connected component of every node (indices into M
+    points) over the ``links`` whose two ends are both nodes."""
+    local = np.full(m, -1, np.int64)
+    local[nodes] = np.arange(len(nodes))
+    a, b = local[links[:, 0]], local[links[:, 1]]
+    keep = (a >= 0) & (b >= 0)
+    graph = coo_matrix((np.ones(int(keep.sum()), np.int8), (a[keep], b[keep])), shape=(len(nodes), len(nodes)))
+    return connected_components(graph, directed=False)[1].astype(np.int64)
+
+
+def straight_chains(points: EdgePoints, shape: tuple[int, int], max_residual_px: float = CHAIN_MAX_RESIDUAL_PX,
+                    rounds: int = CHAIN_SPLITS) -> np.ndarray:
+    """(M,) label 0..K-1 of the straight chain of every edge point (-1: none).
+
+    Chains are the connected components of ``chain_links``. Each round, as Douglas-Peucker does:
+    the chord joins a chain's first and last point along its (magnitude-weighted) TLS line; where
+    the farthest point lies more than ``max_residual_px`` from the chord, that point is removed,
+    which cuts the chain there (at its corner, for a chain that turns one); only the chains cut
+    are looked at again."""
+    m = len(points.mag)
+    labels = np.full(m, -1, np.int64)
+    if m == 0:
+        return labels
+    links = chain_links(points, shape)
+    active = np.arange(m)                      # the points of the chains still to check
+    lab = _components(links, active, m)
+    n_final = 0
+    for round_ in range(rounds + 1):
+        n = int(lab.max()) + 1
+        xy = points.xy[active]
+        _, center, direction = _weighted_line_fit(lab, n, xy, points.mag[active])
+        t = np.sum((xy - center[lab]) * direction[lab], axis=1)
+        t_min, t_max = np.full(n, np.inf), np.full(n, -np.inf)
+        np.minimum.at(t_min, lab, t)
+        np.maximum.at(t_max, lab, t)
+        first, last = np.zeros(n, np.int64), np.zeros(n, np.int64)
+        at_min, at_max = np.nonzero(t == t_min[lab])[0], np.nonzero(t == t_max[lab])[0]
+        first[lab[at_min]], last[lab[at_max]] = at_min, at_max
+        chord = xy[last] - xy[first]
+        chord = chord / np.maximum(np.linalg.norm(chord, axis=1), 1e-9)[:, None]
+        rel = xy - xy[first][lab]
+        across = np.abs(rel[:, 0] * chord[lab, 1] - rel[:, 1] * chord[lab, 0])
+        worst = np.zeros(n)
+        np.maximum.at(worst, lab, across)
+        bent = worst > max_residual_px if round_ < rounds else np.zeros(n, bool)
+        # chains that are straight are final
+        final = ~bent
+        rank = np.cumsum(final) - 1 + n_final
+        done = final[lab]
+        labels[active[done]] = rank[lab[done]]
+        n_final += int(final.sum())
+        if not bent.any():
+            break
+        cut = bent[lab] & (across == worst[lab])
+        first_cut = np.zeros(n, np.int64)
+        first_cut[lab[np.nonzero(cut)[0][::-1]]] = np.nonzero(cut)[0][::-1]   # one point per chain
+        keep = ~done
+        keep[first_cut[bent]] = False
+        active = active[keep]
+        if len(active) == 0:
+            break
+        lab = _components(links, active, m)
+    return labels
+
+
+def detect_chains(image: np.ndarray, params: LineParams, grad: Gradients | None = None,
+                  times: StageTimes | None = None) -> Segments2D:
+    """Local segments of an (H, W) uint8 image from straight edge chains (module docstring)."""
+    times = times or StageTimes()
+    t0 = time.perf_counter()
+    grad = grad or Gradients.of(image, params)
+    t0 = times.add("gradients", t0)
+    points = edge_points(grad, with_phi=False)
+    labels = straight_chains(points, image.shape)
+    t0 = times.add("hough", t0)  # the line-finding stage, for comparable breakdowns
+    segments = refine_on_gradient(local_segments(points, labels, params, adapt_length=True, line_fit=True), grad.magnitude)
+    times.add("local segments", t0)
+    return segments
