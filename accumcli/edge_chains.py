@@ -28,14 +28,18 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from scipy.sparse import coo_matrix
+from scipy.spatial import cKDTree
+from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
-from .lines2d import (EdgePoints, Gradients, LineParams, Segments2D, StageTimes, _weighted_line_fit, edge_points,
+from .lines2d import (EdgePoints, Gradients, LineParams, Segments2D, StageTimes, _canonical, _weighted_line_fit,
+                      edge_points,
                       local_segments, refine_on_gradient)
 
 CHAIN_ANGLE_DEG = 20.0        # neighbouring edge pixels link when their gradients differ less than this
 CHAIN_MAX_RESIDUAL_PX = 0.6   # a chain's pixels farther than this from its line split it
+COLLINEAR_DEG = 2.0           # straight chains this close in direction ...
+COLLINEAR_PX = 1.0            # ... and offset across, with ends near each other, are one line
 CHAIN_SPLITS = 8              # rounds of splitting
 
 
@@ -66,8 +70,18 @@ def _components(links: np.ndarray, nodes: np.ndarray, m: int) -> np.ndarray:
     local[nodes] = np.arange(len(nodes))
     a, b = local[links[:, 0]], local[links[:, 1]]
     keep = (a >= 0) & (b >= 0)
-    graph = coo_matrix((np.ones(int(keep.sum()), np.int8), (a[keep], b[keep])), shape=(len(nodes), len(nodes)))
+    graph = csr_matrix((np.ones(int(keep.sum()), np.int8), (a[keep], b[keep])), shape=(len(nodes), len(nodes)))
     return connected_components(graph, directed=False)[1].astype(np.int64)
+
+
+def _argmax_per_run(values: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """Offset, within each run of ``values`` beginning at ``starts``, of the run's first maximum."""
+    run = np.repeat(np.arange(len(starts)), np.diff(np.r_[starts, len(values)]))
+    best = np.maximum.reduceat(values, starts)
+    hit = np.flatnonzero(values == best[run])
+    first_hit = np.full(len(starts), len(values))
+    first_hit[run[hit[::-1]]] = hit[::-1]          # the last write wins: the first maximum
+    return first_hit - starts
 
 
 def straight_chains(points: EdgePoints, shape: tuple[int, int], max_residual_px: float = CHAIN_MAX_RESIDUAL_PX,
@@ -92,18 +106,15 @@ def straight_chains(points: EdgePoints, shape: tuple[int, int], max_residual_px:
         xy = points.xy[active]
         _, center, direction = _weighted_line_fit(lab, n, xy, points.mag[active])
         t = np.sum((xy - center[lab]) * direction[lab], axis=1)
-        t_min, t_max = np.full(n, np.inf), np.full(n, -np.inf)
-        np.minimum.at(t_min, lab, t)
-        np.maximum.at(t_max, lab, t)
-        first, last = np.zeros(n, np.int64), np.zeros(n, np.int64)
-        at_min, at_max = np.nonzero(t == t_min[lab])[0], np.nonzero(t == t_max[lab])[0]
-        first[lab[at_min]], last[lab[at_max]] = at_min, at_max
+        order = np.lexsort((t, lab))               # by chain, then along it
+        starts = np.flatnonzero(np.r_[True, lab[order][1:] != lab[order][:-1]])
+        first, last = order[starts], order[np.r_[starts[1:], len(order)] - 1]
         chord = xy[last] - xy[first]
         chord = chord / np.maximum(np.linalg.norm(chord, axis=1), 1e-9)[:, None]
         rel = xy - xy[first][lab]
         across = np.abs(rel[:, 0] * chord[lab, 1] - rel[:, 1] * chord[lab, 0])
-        worst = np.zeros(n)
-        np.maximum.at(worst, lab, across)
+        worst_at = starts + _argmax_per_run(across[order], starts)
+        worst = across[order][worst_at]
         bent = worst > max_residual_px if round_ < rounds else np.zeros(n, bool)
         # chains that are straight are final
         final = ~bent
@@ -113,16 +124,59 @@ def straight_chains(points: EdgePoints, shape: tuple[int, int], max_residual_px:
         n_final += int(final.sum())
         if not bent.any():
             break
-        cut = bent[lab] & (across == worst[lab])
-        first_cut = np.zeros(n, np.int64)
-        first_cut[lab[np.nonzero(cut)[0][::-1]]] = np.nonzero(cut)[0][::-1]   # one point per chain
+        cut = order[worst_at[bent]]                 # one point per bent chain
         keep = ~done
-        keep[first_cut[bent]] = False
+        keep[cut] = False
         active = active[keep]
         if len(active) == 0:
             break
         lab = _components(links, active, m)
     return labels
+
+
+def collinear_lines(points: EdgePoints, chains: np.ndarray, reach_px: float, max_deg: float = COLLINEAR_DEG,
+                    max_offset_px: float = COLLINEAR_PX) -> np.ndarray:
+    """(K,) line 0..L-1 of every straight chain (``chains``: (M,) chain label 0..K-1 of every edge
+    point, or -1). Straight chains
+    (labels ``chains``) whose ends lie within ``reach_px`` of each other, whose directions agree
+    within ``max_deg`` and whose ends lie within ``max_offset_px`` of the other chain's line are
+    one line (transitively), as a Hough line is: a corner, a crossing or a polarity flip
+    interrupts a chain but not the line that stereo matching propagates along."""
+    on = chains >= 0
+    if not on.any():
+        return np.zeros(0, np.int64)
+    lab, xy = chains[on], points.xy[on]
+    n = int(lab.max()) + 1
+    _, center, direction = _weighted_line_fit(lab, n, xy, points.mag[on])
+    t = np.sum((xy - center[lab]) * direction[lab], axis=1)
+    t_lo, t_hi = np.full(n, np.inf), np.full(n, -np.inf)
+    np.minimum.at(t_lo, lab, t)
+    np.maximum.at(t_hi, lab, t)
+    ends = np.concatenate([center + t_lo[:, None] * direction, center + t_hi[:, None] * direction])
+    chain_of = np.concatenate([np.arange(n), np.arange(n)])
+    pairs = cKDTree(ends).query_pairs(reach_px, output_type="ndarray")
+    i, j = chain_of[pairs[:, 0]], chain_of[pairs[:, 1]]
+    normal = np.column_stack([-direction[:, 1], direction[:, 0]])
+    ok = (i != j) & (np.abs(np.sum(direction[i] * direction[j], axis=1)) >= np.cos(np.radians(max_deg)))
+    ok &= np.abs(np.sum((ends[pairs[:, 1]] - center[i]) * normal[i], axis=1)) <= max_offset_px
+    ok &= np.abs(np.sum((ends[pairs[:, 0]] - center[j]) * normal[j], axis=1)) <= max_offset_px
+    graph = csr_matrix((np.ones(int(ok.sum()), np.int8), (i[ok], j[ok])), shape=(n, n))
+    return connected_components(graph, directed=False)[1].astype(np.int64)
+
+
+def _on_lines(segments: Segments2D, points: EdgePoints, chains: np.ndarray, line_of_chain: np.ndarray) -> Segments2D:
+    """``segments`` (whose line_id is their chain) with line_id, t and line_direction those of the
+    chain's collinear line (fitted to all its chains' points)."""
+    if len(segments) == 0:
+        return segments
+    on = chains >= 0
+    line = line_of_chain[chains[on]]
+    _, center, direction = _weighted_line_fit(line, int(line.max()) + 1, points.xy[on], points.mag[on])
+    line_id = line_of_chain[segments.line_id]
+    direction = _canonical(direction[line_id])
+    t = np.sum((segments.centers - center[line_id]) * direction, axis=1)
+    return Segments2D(segments.centers, segments.directions, segments.lengths, segments.polarity,
+                      segments.contrast, line_id, t, direction)
 
 
 def detect_chains(image: np.ndarray, params: LineParams, grad: Gradients | None = None,
@@ -133,8 +187,11 @@ def detect_chains(image: np.ndarray, params: LineParams, grad: Gradients | None 
     grad = grad or Gradients.of(image, params)
     t0 = times.add("gradients", t0)
     points = edge_points(grad, with_phi=False)
-    labels = straight_chains(points, image.shape)
+    chains = straight_chains(points, image.shape)
+    line_of_chain = collinear_lines(points, chains, 2 * params.junction_radius_px)
     t0 = times.add("hough", t0)  # the line-finding stage, for comparable breakdowns
-    segments = refine_on_gradient(local_segments(points, labels, params, adapt_length=True, line_fit=True), grad.magnitude)
+    segments = local_segments(points, chains, params, adapt_length=True, line_fit=True,
+                              min_support_px=params.chain_min_support_px)
+    segments = refine_on_gradient(_on_lines(segments, points, chains, line_of_chain), grad.magnitude)
     times.add("local segments", t0)
     return segments

@@ -58,7 +58,8 @@ class LineParams:
     max_gap_px: float = 3.0           # a longer gap along a line ends a run of support
     end_extension_px: float = 2.5     # pieces reach this far beyond a run's first and last pixel
     junction_radius_px: float = 7.0   # runs ending this near another line's run meet it at the corner
-    detector: str = "hough"
+    chain_min_support_px: float = 10.0  # chains: a run of support needs this span of edge pixels
+    detector: str = "chains"
 
 
 @dataclass
@@ -349,11 +350,13 @@ def _canonical(directions: np.ndarray) -> np.ndarray:
 
 
 def local_segments(points: EdgePoints, labels: np.ndarray, params: LineParams,
-                   adapt_length: bool = False, line_fit: bool = False) -> Segments2D:
+                   adapt_length: bool = False, line_fit: bool = False,
+                   min_support_px: float = 0.0) -> Segments2D:
     """Cut every labelled line into local segments (see the module docstring).
 
     Along a line, consecutive supporting pixels (gaps up to ``max_gap_px``,
-    same polarity) form runs. A run at least ``min_fill * L`` long and filled
+    same polarity) form runs. A run at least ``min_fill * L`` long, spanning
+    ``min_support_px`` of pixels (before the end extension) and filled
     to ``min_fill`` gives ``ceil(R / L)`` pieces of length L spread evenly from
     its first to its last pixel (overlapping a little where R is not a
     multiple of L), so that an edge is covered to its ends; each piece is
@@ -391,11 +394,12 @@ def local_segments(points: EdgePoints, labels: np.ndarray, params: LineParams,
     run_line = labels[brk]
     count_run = np.bincount(run, minlength=n_runs)
     fill = count_run / ((t_hi - t_lo + 1.0) * np.max(np.abs(line_dir[run_line]), axis=1))
+    support = t_hi - t_lo + 1.0
     t_lo, t_hi = _complete_junctions(t_lo, t_hi, line_center[run_line], line_dir[run_line], run_line, params)
     run_length = t_hi - t_lo + 1.0
     # Canny and the vote lose a pixel or two where edges meet: let the pieces reach past the run's ends
     t_lo, run_length = t_lo - params.end_extension_px, run_length + 2 * params.end_extension_px
-    long_enough = (run_length >= params.min_fill * L) & (fill >= params.min_fill)
+    long_enough = (run_length >= params.min_fill * L) & (fill >= params.min_fill) & (support >= min_support_px)
     pieces = np.where(long_enough, np.ceil(run_length / L), 0).astype(np.int64)
     # piece centres evenly from the run's first to its last pixel (overlapping slightly when needed)
     if adapt_length:   # pieces of equal length tiling the run
@@ -633,6 +637,14 @@ def detect_ed(image: np.ndarray, params: LineParams, grad: Gradients | None = No
     return _detect_with(_ed_lines, image, params, grad, times)
 
 
-from .edge_chains import detect_chains  # noqa: E402  (it builds on the functions above)
+def detect_chains(image: np.ndarray, params: LineParams, grad: Gradients | None = None,
+                  times: StageTimes | None = None) -> Segments2D:
+    """Local segments from straight edge chains: ``edge_chains.detect_chains`` (that module builds
+    on this one, so it is imported here on first use)."""
+    from .edge_chains import detect_chains as detect
+
+    return detect(image, params, grad, times)
+
+
 
 DETECTORS = {"hough": detect_hough, "lsd": detect_lsd, "fld": detect_fld, "ed": detect_ed, "chains": detect_chains}
