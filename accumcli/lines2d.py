@@ -21,9 +21,13 @@ the gradient is strong and its orientation agrees with the line's normal):
    pixel grid. Each piece is a local segment, fitted first to its sub-pixel
    edge points and then refined on the gradient itself (``refine_on_gradient``).
 
-``detect_lsd`` is the alternative detector: OpenCV's line segment detector,
-whose segments are cut into the same local segments (the paper names Hough's
-weakness on short segments).
+The detectors (``DETECTORS``, ``LineParams.detector``): ``hough`` (the above, the paper's);
+``chains`` (the default, ``edge_chains``: straight edge chains, for short and crowded edges,
+where Hough's smoothed orientations and vote windows lose them); ``lsd`` (OpenCV's line segment
+detector), ``fld`` (opencv-contrib's FastLineDetector) and ``ed`` (its EdgeDrawing lines), whose
+line segments ``pieces_on_lines`` cuts into local segments. On the suite (benchmarks/suite.py)
+``chains`` measured best on the median and worst rows; ``ed`` and ``fld``, fast as they are,
+found less than Hough on the devset.
 
 Pixel coordinates are (u, v) = (column, row), origin at the centre of the
 top-left pixel.
@@ -38,6 +42,8 @@ from functools import cached_property
 import cv2
 import numpy as np
 from scipy.spatial import cKDTree
+
+from .errors import InputError
 
 
 @dataclass(frozen=True)
@@ -387,10 +393,8 @@ def local_segments(points: EdgePoints, labels: np.ndarray, params: LineParams,
     brk[1:] = (labels[1:] != labels[:-1]) | (polarity[1:] != polarity[:-1]) | (np.diff(t) > params.max_gap_px)
     run = np.cumsum(brk) - 1
     n_runs = int(run[-1]) + 1
-    t_lo = np.full(n_runs, np.inf)
-    t_hi = np.full(n_runs, -np.inf)
-    np.minimum.at(t_lo, run, t)
-    np.maximum.at(t_hi, run, t)
+    t_lo = t[brk]                                   # t ascends within a run
+    t_hi = t[np.r_[np.flatnonzero(brk)[1:], len(t)] - 1]
     run_line = labels[brk]
     count_run = np.bincount(run, minlength=n_runs)
     fill = count_run / ((t_hi - t_lo + 1.0) * np.max(np.abs(line_dir[run_line]), axis=1))
@@ -602,9 +606,16 @@ def detect_lsd(image: np.ndarray, params: LineParams, grad: Gradients | None = N
     return _detect_with(_lsd_lines, image, params, grad, times)
 
 
+def _ximgproc():
+    """opencv-contrib's ximgproc module; InputError if the installed OpenCV lacks it."""
+    if not hasattr(cv2, "ximgproc"):
+        raise InputError("the fld and ed detectors need opencv-contrib-python-headless (cv2.ximgproc)")
+    return cv2.ximgproc
+
+
 def _fld_lines(image: np.ndarray, params: LineParams) -> np.ndarray:
     high = 8.0 * params.gradient_threshold  # Canny on 3x3 Sobel, as Gradients.edges
-    fld = cv2.ximgproc.createFastLineDetector(int(np.ceil(params.min_fill * params.segment_length_px)), 1.414,
+    fld = _ximgproc().createFastLineDetector(int(np.ceil(params.min_fill * params.segment_length_px)), 1.414,
                                               high / 2, high, 3, False)
     found = fld.detect(cv2.GaussianBlur(image, (0, 0), params.blur_sigma) if params.blur_sigma > 0 else image)
     return np.zeros((0, 4)) if found is None else found
@@ -617,8 +628,8 @@ def detect_fld(image: np.ndarray, params: LineParams, grad: Gradients | None = N
 
 
 def _ed_lines(image: np.ndarray, params: LineParams) -> np.ndarray:
-    ed = cv2.ximgproc.createEdgeDrawing()
-    p = cv2.ximgproc.EdgeDrawing.Params()
+    ed = _ximgproc().createEdgeDrawing()
+    p = _ximgproc().EdgeDrawing.Params()
     p.MinLineLength = int(np.ceil(params.min_fill * params.segment_length_px))
     p.MinPathLength = p.MinLineLength
     p.Sigma = params.blur_sigma
