@@ -69,13 +69,17 @@ def chain_links(points: EdgePoints, shape: tuple[int, int]) -> np.ndarray:
     return np.concatenate(links)
 
 
-def _components(links: np.ndarray, nodes: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
+def _components(links: np.ndarray, nodes: np.ndarray, m: int, key: np.ndarray | None = None
+                ) -> tuple[np.ndarray, np.ndarray]:
     """(len(nodes),) label 0..K-1 of the connected component of every node (indices into M
-    points) over the ``links`` whose two ends are both nodes, and those links."""
+    points) over the ``links`` whose two ends are both nodes (of the same ``key``, (len(nodes),),
+    if given), and those links."""
     local = np.full(m, -1, np.int64)
     local[nodes] = np.arange(len(nodes))
     a, b = local[links[:, 0]], local[links[:, 1]]
     keep = (a >= 0) & (b >= 0)
+    if key is not None:
+        keep[keep] = key[a[keep]] == key[b[keep]]
     graph = csr_matrix((np.ones(int(keep.sum()), np.int8), (a[keep], b[keep])), shape=(len(nodes), len(nodes)))
     return connected_components(graph, directed=False)[1].astype(np.int64), links[keep]
 
@@ -96,8 +100,10 @@ def straight_chains(points: EdgePoints, shape: tuple[int, int], max_residual_px:
 
     Chains are the connected components of ``chain_links``. Each round, as Douglas-Peucker does:
     the chord joins a chain's first and last point along its (magnitude-weighted) TLS line; where
-    the farthest point lies more than ``max_residual_px`` from the chord, that point is removed,
-    which cuts the chain there (at its corner, for a chain that turns one); only the chains cut
+    the farthest point lies more than ``max_residual_px`` from the chord, the chain is cut across
+    its line at that point: its links across the cut are dropped, and that point with its
+    8-neighbours in the chain (at a corner, its own pixels bend both arms); a part left in pieces
+    becomes several chains. Only the chains cut
     are looked at again; chains still bent after ``rounds`` rounds, or shorter than
     ``min_length_px`` (too short to give a piece), stay as they are."""
     m = len(points.mag)
@@ -129,12 +135,19 @@ def straight_chains(points: EdgePoints, shape: tuple[int, int], max_residual_px:
         n_final += int(final.sum())
         if not bent.any():
             break
-        keep = ~done
-        keep[order[worst_at[bent]]] = False        # one point per bent chain
+        # cut each bent chain across its line at the farthest point, which lies strictly between
+        # the chain's first and last point along the line (those two lie on the chord)
+        t_cut = np.full(n, np.inf)
+        t_cut[bent] = t[order[worst_at[bent]]]
+        # and drop that point with its 8-neighbours in the chain: a corner's own pixels bend both arms
+        cut_at = np.full((n, 2), -10, np.int64)
+        cut_at[bent] = points.pixel[active[order[worst_at[bent]]]]
+        keep = ~done & (np.max(np.abs(points.pixel[active] - cut_at[lab]), axis=1) > 1)
+        side = lab * 2 + (t > t_cut[lab])
         active = active[keep]
         if len(active) == 0:
             break
-        lab, links = _components(links, active, m)
+        lab, links = _components(links, active, m, side[keep])
     return labels
 
 
@@ -196,6 +209,8 @@ def detect_chains(image: np.ndarray, params: LineParams, grad: Gradients | None 
     t0 = times.add("hough", t0)  # the line-finding stage, for comparable breakdowns
     segments = local_segments(points, chains, params, adapt_length=True, line_fit=True,
                               min_support_px=params.chain_min_support_px)
-    segments = refine_on_gradient(_on_lines(segments, points, chains, line_of_chain), grad.magnitude)
+    # the chain's fit orients a piece better than its 13 cuts near a corner: refinement may turn it 1 deg
+    segments = refine_on_gradient(_on_lines(segments, points, chains, line_of_chain), grad.magnitude,
+                                  max_turn_deg=1.0)
     times.add("local segments", t0)
     return segments

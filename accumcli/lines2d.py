@@ -448,7 +448,7 @@ def local_segments(points: EdgePoints, labels: np.ndarray, params: LineParams,
 
 
 def refine_on_gradient(segments: Segments2D, magnitude: np.ndarray, profiles: int = 13,
-                       reach: int = 2) -> Segments2D:
+                       reach: int = 2, max_turn_deg: float = 3.0) -> Segments2D:
     """Sub-pixel position and orientation of local segments from the gradient itself.
 
     Along each segment, ``profiles`` cuts across it (along its own normal, so
@@ -457,7 +457,8 @@ def refine_on_gradient(segments: Segments2D, magnitude: np.ndarray, profiles: in
     strongest sample and its neighbours places the edge in each cut, and a
     weighted total-least-squares line through those points is the refined
     segment. Per-pixel edge points carry a staircase bias on slanted edges
-    that this avoids.
+    that this avoids. A segment that would move more than 1 px or turn more than ``max_turn_deg``
+    keeps its place.
     """
     n = len(segments)
     if n == 0:
@@ -480,7 +481,7 @@ def refine_on_gradient(segments: Segments2D, magnitude: np.ndarray, profiles: in
                          segments.line_id, segments.t, segments.line_direction)
     # a cut that lost the edge (corner, clutter) shows as a large change: keep the original then
     moved = (np.abs(np.sum((centers - segments.centers) * normals, axis=1)) > 1.0) | \
-        (np.abs(np.sum(directions * segments.directions, axis=1)) < np.cos(np.radians(3)))
+        (np.abs(np.sum(directions * segments.directions, axis=1)) < np.cos(np.radians(max_turn_deg)))
     return Segments2D(*(np.where(moved.reshape((-1,) + (1,) * (a.ndim - 1)), a, b)
                         for a, b in ((getattr(segments, f), getattr(refined, f))
                                      for f in Segments2D.__dataclass_fields__)))
