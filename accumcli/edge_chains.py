@@ -11,9 +11,9 @@ a line's votes to pile up in a +-3 deg window: short and crowded edges are lost.
    (same polarity, within ``CHAIN_ANGLE_DEG``). Connected components of the links are the chains;
    a corner or a junction (where the orientation jumps) and a polarity flip end a chain.
 3. Straight chains: as Douglas-Peucker does, a chain whose farthest point lies more than
-   ``CHAIN_MAX_RESIDUAL_PX`` from the chord between its ends loses that point, which cuts it
-   there (at its corner), repeatedly (``CHAIN_SPLITS`` rounds, only the chains cut are looked at
-   again).
+   ``CHAIN_MAX_RESIDUAL_PX`` from the chord between its ends is cut there (at its corner, whose
+   own pixels are dropped), repeatedly (``CHAIN_SPLITS`` rounds, only the chains cut are looked
+   at again; ``straight_chains``).
 4. Local pieces (``lines2d.local_segments``): runs of support along each straight chain spanning
    ``chain_min_support_px`` of pixels are tiled by ``ceil(R / L)`` equal pieces (L =
    ``segment_length_px``; a run shorter than L is one piece of its own length), each on the
@@ -103,9 +103,9 @@ def straight_chains(points: EdgePoints, shape: tuple[int, int], max_residual_px:
     the farthest point lies more than ``max_residual_px`` from the chord, the chain is cut across
     its line at that point: its links across the cut are dropped, and that point with its
     8-neighbours in the chain (at a corner, its own pixels bend both arms); a part left in pieces
-    becomes several chains. Only the chains cut
-    are looked at again; chains still bent after ``rounds`` rounds, or shorter than
-    ``min_length_px`` (too short to give a piece), stay as they are."""
+    becomes several chains. Only the chains cut are looked at again; chains still bent after
+    ``rounds`` rounds, or shorter than ``min_length_px`` (too short to give a piece), stay as
+    they are."""
     m = len(points.mag)
     labels = np.full(m, -1, np.int64)
     if m == 0:
@@ -154,10 +154,9 @@ def straight_chains(points: EdgePoints, shape: tuple[int, int], max_residual_px:
 def collinear_lines(points: EdgePoints, chains: np.ndarray, reach_px: float, max_deg: float = COLLINEAR_DEG,
                     max_offset_px: float = COLLINEAR_PX) -> np.ndarray:
     """(K,) line 0..L-1 of every straight chain (``chains``: (M,) chain label 0..K-1 of every edge
-    point, or -1). Straight chains
-    (labels ``chains``) whose ends lie within ``reach_px`` of each other, whose directions agree
-    within ``max_deg`` and whose ends lie within ``max_offset_px`` of the other chain's line are
-    one line (transitively), as a Hough line is: a corner, a crossing or a polarity flip
+    point, or -1). Chains whose ends lie within ``reach_px`` of each other, whose directions
+    agree within ``max_deg`` and whose ends lie within ``max_offset_px`` of the other chain's
+    line are one line (transitively), as a Hough line is: a corner, a crossing or a polarity flip
     interrupts a chain but not the line that stereo matching propagates along."""
     on = chains >= 0
     if not on.any():
@@ -210,7 +209,7 @@ def detect_chains(image: np.ndarray, params: LineParams, grad: Gradients | None 
     segments = local_segments(points, chains, params, adapt_length=True, line_fit=True,
                               min_support_px=params.chain_min_support_px)
     # the chain's fit orients a piece better than its 13 cuts near a corner: refinement may turn it 1 deg
-    segments = refine_on_gradient(_on_lines(segments, points, chains, line_of_chain), grad.magnitude,
-                                  max_turn_deg=1.0)
+    segments = _on_lines(refine_on_gradient(segments, grad.magnitude, max_turn_deg=1.0), points, chains,
+                         line_of_chain)
     times.add("local segments", t0)
     return segments

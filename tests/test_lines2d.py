@@ -245,3 +245,34 @@ def test_pieces_reach_the_corner_and_do_not_bend_there():
         assert angle[nearest] < 1.0
     # the edge through the junction (the grey levels beside it change there, its polarity does not)
     assert _edge_recall(segments, np.array([240.0, 45.0]), np.array([240.0, 195.0]))[0] >= 0.9
+
+
+def test_chains_across_a_crossing_are_one_line_with_consistent_positions():
+    """A 2x2 checkerboard at 17 degrees: each of its two edges through the X crossing changes
+    polarity there, so it gives two chains, but one line: the pieces on both halves share a
+    line_id, their line_direction lies within 0.3 deg of the truth, and t is the position along
+    it (t differences equal the centres' distances along line_direction)."""
+    angle = 17.0
+    c, s_ = np.cos(np.radians(angle)), np.sin(np.radians(angle))
+    u, v = np.array([c, s_]), np.array([-s_, c])
+    centre, half = np.array([160.0, 120.0]), 50.0
+    quads = []
+    for i, j, grey in ((0, 0, 190.0), (1, 1, 190.0), (0, 1, 70.0), (1, 0, 70.0)):
+        lo = centre + (i - 1) * half * u + (j - 1) * half * v
+        quads.append((np.array([lo, lo + half * u, lo + half * u + half * v, lo + half * v]), grey))
+    image = _render(quads, background=130.0, seed=4)
+    segments = DETECTORS["chains"](image, LineParams())
+    for d in (u, v):
+        n = np.array([-d[1], d[0]])
+        rel = segments.centers - centre
+        on = (np.abs(rel @ n) < 1.0) & (np.abs(segments.directions @ d) > np.cos(np.radians(3)))
+        along = rel[on] @ d
+        assert (along < -10).sum() >= 2 and (along > 10).sum() >= 2   # pieces on both halves
+        polarity_flips = set(segments.polarity[on][along < -10]) != set(segments.polarity[on][along > 10])
+        assert polarity_flips
+        assert len(set(segments.line_id[on].tolist())) == 1
+        line_dir = segments.line_direction[on]
+        assert np.degrees(np.arccos(np.clip(np.abs(line_dir @ d).min(), 0, 1))) < 0.3
+        spacing = (segments.centers[on] - segments.centers[on][0]) @ line_dir[0]
+        assert np.allclose(segments.t[on] - segments.t[on][0], spacing, atol=1e-6)
+        assert np.abs(spacing - np.sign(line_dir[0] @ d) * (along - along[0])).max() < 0.05 * np.ptp(along)
