@@ -25,9 +25,10 @@ The detectors (``DETECTORS``, ``LineParams.detector``): ``hough`` (the above, th
 ``chains`` (the default, ``edge_chains``: straight edge chains, for short and crowded edges,
 where Hough's smoothed orientations and vote windows lose them); ``lsd`` (OpenCV's line segment
 detector), ``fld`` (opencv-contrib's FastLineDetector) and ``ed`` (its EdgeDrawing lines), whose
-line segments ``pieces_on_lines`` cuts into local segments. On the suite (benchmarks/suite.py)
-``chains`` measured best on the median and worst rows; ``ed`` and ``fld``, fast as they are,
-found less than Hough on the devset.
+line segments ``pieces_on_lines`` cuts into local segments. On the suite (benchmarks/suite.py,
+19 rows) ``chains`` against ``hough`` gave, on the median row, correct 3D 0.37 of the seen length
+(0.29), near-object precision 0.81 (0.75), completeness 0.49 (0.39), accumulated precision 0.90
+(0.92); ``ed``, ``fld`` and ``lsd`` found less on the devset.
 
 Pixel coordinates are (u, v) = (column, row), origin at the centre of the
 top-left pixel.
