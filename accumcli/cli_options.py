@@ -74,8 +74,11 @@ def recording_options(func):
 def extraction_options(func):
     """Options of single-frame extraction (extract, accumulate and track), given as ``extract_params``."""
     options = [
-        click.option("--detector", type=click.Choice(["hough", "lsd"]), default="hough", show_default=True,
-                     help="2D line detector: the paper's orientation-sensitive Hough transform, or OpenCV's LSD."),
+        click.option("--detector", type=click.Choice(["chains", "hough", "lsd", "fld", "ed"]), default="chains",
+                     show_default=True,
+                     help="2D line detector: edge chains split at corners (the default, best on the suite), the "
+                          "paper's orientation-sensitive Hough transform, or OpenCV's LSD, FastLineDetector, "
+                          "EdgeDrawing."),
         click.option("--segment-length", type=click.FloatRange(4.0, 100.0), default=15.0, show_default=True,
                      help="Length of a local segment, pixels."),
         click.option("--gradient-threshold", type=click.FloatRange(0.1, 100.0), default=3.0, show_default=True,

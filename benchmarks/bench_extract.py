@@ -32,7 +32,7 @@ RESULT = {{'frames': len(frames), 'seconds': seconds, 'segments': segments,
 def main() -> dict:
     sample = str(ROOT / "sample_data" / "sim_box.mcap")
     results = {}
-    for detector in ("hough", "lsd"):
+    for detector in ("chains", "hough", "lsd"):
         r = run_child(EXTRACT.format(path=sample, detector=detector))
         results[detector] = r
         stages = ", ".join(f"{k} {v:.1f}" for k, v in r["stages_ms"].items())

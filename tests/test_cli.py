@@ -267,3 +267,14 @@ def test_a_rosbag2_folder_is_a_recording_for_every_command(small_recording, tmp_
     assert run("accumulate", small_recording, "-o", tmp_path / "p.json", "--frames", "0:2").exit_code == 0
     assert (tmp_path / "m.json").read_bytes() == (tmp_path / "p.json").read_bytes()
     assert run("view", bag, tmp_path / "m.json", "--png", tmp_path / "v.png").exit_code == 0
+
+
+def test_detector_choices_are_the_librarys():
+    """The CLI offers every detector the library has, with the library's default."""
+    import click
+
+    from accumcli.lines2d import DETECTORS, LineParams
+
+    option = next(p for p in main.commands["extract"].params if p.name == "detector")
+    assert isinstance(option.type, click.Choice) and set(option.type.choices) == set(DETECTORS)
+    assert option.default == LineParams().detector
