@@ -41,3 +41,19 @@ def run_child(code: str) -> dict:
     if out.returncode != 0:
         raise RuntimeError(f"benchmark child failed:\n{out.stderr[-3000:]}")
     return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def score_rows(rows, score) -> dict:
+    """``score(row)`` for every row (by ``row.name``); a row's failure is reported in its row
+    (``{"error": ...}``) and the others go on. Times each row on stderr."""
+    import time
+
+    results = {}
+    for row in rows:
+        start = time.perf_counter()
+        try:
+            results[row.name] = score(row)
+        except Exception as e:  # noqa: BLE001 - the scoreboard reports every row
+            results[row.name] = {"error": f"{type(e).__name__}: {e}"}
+        print(f"  {row.name}: {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
+    return results

@@ -23,7 +23,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import CACHE, ROOT, recording  # noqa: E402
+from common import CACHE, ROOT, recording, score_rows  # noqa: E402
 
 SHARED = ROOT.parent / "shared" / "data"
 SIMULATED = 12
@@ -132,14 +132,8 @@ def main(argv=None) -> int:
     rows = simulated_rows() + real_and_independent_rows()
     if args.only:
         rows = [r for r in rows if args.only in r.name]
-    results, t0 = {}, time.perf_counter()
-    for row in rows:
-        start = time.perf_counter()
-        try:
-            results[row.name] = score(row)
-        except Exception as e:  # a row's failure is reported in its row, the others go on
-            results[row.name] = {"error": f"{type(e).__name__}: {e}"}
-        print(f"  {row.name}: {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
+    t0 = time.perf_counter()
+    results = score_rows(rows, score)
     lines = table(results, rows)
     print("\n".join(lines))
     print(f"\n{len(rows)} recordings in {time.perf_counter() - t0:.0f} s")

@@ -33,7 +33,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import CACHE, ROOT, recording  # noqa: E402
+from common import CACHE, ROOT, recording, score_rows  # noqa: E402
 
 SHARED = ROOT.parent / "shared" / "data"
 SEEDS = (201, 202, 203, 204, 205, 206)
@@ -146,14 +146,8 @@ def main(argv=None) -> int:
     parser.add_argument("--only", help="run only the rows whose name contains this")
     args = parser.parse_args(argv)
     chosen = [r for r in rows() if not args.only or args.only in r.name]
-    results, t0 = {}, time.perf_counter()
-    for row in chosen:
-        start = time.perf_counter()
-        try:
-            results[row.name] = score(row)
-        except Exception as e:  # a row's failure is reported in its row, the others go on
-            results[row.name] = {"error": f"{type(e).__name__}: {e}"}
-        print(f"  {row.name}: {time.perf_counter() - start:.1f} s {results[row.name]}", file=sys.stderr, flush=True)
+    t0 = time.perf_counter()
+    results = score_rows(chosen, score)
     print("\n".join(table(results, chosen)))
     print(f"\n{len(chosen)} rows in {time.perf_counter() - t0:.0f} s")
     return 0
