@@ -32,7 +32,6 @@ wrong (single-frame near-object precision 0.73 with them, 0.80 without, on the d
 
 from __future__ import annotations
 
-import time
 
 import numpy as np
 from scipy.sparse import csr_matrix
@@ -40,7 +39,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from .lines2d import (EdgePoints, Gradients, LineParams, Segments2D, StageTimes, _canonical, _weighted_line_fit,
-                      edge_points, local_segments, refine_on_gradient)
+                      detection_start, edge_points, local_segments, refine_on_gradient)
 
 CHAIN_ANGLE_DEG = 20.0        # neighbouring edge pixels link when their gradients differ less than this
 CHAIN_MAX_RESIDUAL_PX = 0.6   # a chain with a point farther than this from its chord is cut there
@@ -198,10 +197,7 @@ def _on_lines(segments: Segments2D, points: EdgePoints, chains: np.ndarray, line
 def detect_chains(image: np.ndarray, params: LineParams, grad: Gradients | None = None,
                   times: StageTimes | None = None) -> Segments2D:
     """Local segments of an (H, W) uint8 image from straight edge chains (module docstring)."""
-    times = times or StageTimes()
-    t0 = time.perf_counter()
-    grad = grad or Gradients.of(image, params)
-    t0 = times.add("gradients", t0)
+    grad, times, t0 = detection_start(image, params, grad, times)
     points = edge_points(grad, with_phi=False)
     chains = straight_chains(points, image.shape, min_length_px=params.chain_min_support_px)
     line_of_chain = collinear_lines(points, chains, 2 * params.junction_radius_px)

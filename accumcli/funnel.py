@@ -18,7 +18,6 @@ truth counts for completeness. Needs the frames file to carry the 2D segments an
 from __future__ import annotations
 
 import base64
-import json
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -32,18 +31,15 @@ DETECT_DEG = 10.0    # direction difference of a 2D segment from the projected e
 STAGES = ("detected_2d", "not_critical", "matched", "correct_3d")
 
 
-def per_pose_seen(truth_path) -> dict[int, np.ndarray]:
-    """timestamp_ns -> (S,) bool samples seen in that frame, from the truth's per-pose bits (empty
-    when the truth has none)."""
-    with open(truth_path, encoding="utf-8") as f:
-        doc = json.load(f)
-    total = sum(len(e.get("seen") or []) for e in doc.get("edges", []))
-    seen = {}
-    for pose in doc.get("poses", []):
-        if isinstance(pose.get("seen"), str) and total:
-            bits = np.unpackbits(np.frombuffer(base64.b64decode(pose["seen"]), np.uint8))[:total]
-            seen[int(pose["timestamp_ns"])] = bits.astype(bool)
-    return seen
+def per_pose_seen(truth, samples: int) -> dict[int, np.ndarray]:
+    """timestamp_ns -> (samples,) bool: the samples seen in that frame, from the truth's per-pose
+    bits (empty when it has none or they do not cover ``samples``)."""
+    total = sum(len(s) for s in truth.seen if s is not None)   # the bits cover the edges' own samples
+    if total != samples:
+        return {}
+    bits = {t_ns: np.unpackbits(np.frombuffer(base64.b64decode(text), np.uint8))[:total].astype(bool)
+            for t_ns, text in truth.pose_seen.items()}
+    return {t_ns: b for t_ns, b in bits.items() if len(b) == total}
 
 
 def _project(points_cam: np.ndarray, intr: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -118,19 +114,17 @@ def frame_funnel(segments_camera: Segments, doc: dict, T_camera_object: np.ndarr
     return counts
 
 
-def funnel(frames, truth, truth_path, tol: Tolerances = Tolerances()) -> dict:
+def funnel(frames, truth, tol: Tolerances = Tolerances()) -> dict:
     """The funnel over ``frames`` (iterable of (timestamp_ns, Segments in the camera frame, line doc)):
     each stage's share of the seen samples, summed over the frames with a truth pose."""
     edges = EdgeSamples.of(truth, tol)
-    bits = per_pose_seen(truth_path)
+    bits = per_pose_seen(truth, len(edges.points))
     totals: dict[str, int] = {}
     for t_ns, segments, doc in frames:
         T = truth.pose_at(int(t_ns))
         if T is None:
             continue
         seen = bits.get(int(t_ns))
-        if seen is not None and len(seen) != len(edges.points):
-            seen = None
         for key, value in frame_funnel(segments, doc, T, edges, seen, tol).items():
             totals[key] = totals.get(key, 0) + value
     n = max(totals.get("seen", 0), 1)

@@ -527,13 +527,20 @@ def _empty() -> Segments2D:
                       np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 2)))
 
 
-def detect_hough(image: np.ndarray, params: LineParams, grad: Gradients | None = None,
-                 times: StageTimes | None = None) -> Segments2D:
-    """Local segments of an (H, W) uint8 image by the orientation-sensitive Hough transform."""
+def detection_start(image: np.ndarray, params: "LineParams", grad: "Gradients | None",
+                    times: "StageTimes | None") -> tuple:
+    """What every detector does first: the image's gradients (computed unless given) timed as the
+    'gradients' stage; returns (gradients, times, the clock after them)."""
     times = times or StageTimes()
     t0 = time.perf_counter()
     grad = grad or Gradients.of(image, params)
-    t0 = times.add("gradients", t0)
+    return grad, times, times.add("gradients", t0)
+
+
+def detect_hough(image: np.ndarray, params: LineParams, grad: Gradients | None = None,
+                 times: StageTimes | None = None) -> Segments2D:
+    """Local segments of an (H, W) uint8 image by the orientation-sensitive Hough transform."""
+    grad, times, t0 = detection_start(image, params, grad, times)
     points = edge_points(grad)
     labels = hough_assign(points, image.shape, params)
     t0 = times.add("hough", t0)
@@ -581,10 +588,7 @@ def _detect_with(find_lines, image: np.ndarray, params: LineParams, grad: Gradie
                  times: StageTimes | None) -> Segments2D:
     """Local segments of the (K, 4) line segments (u0, v0, u1, v1 px) that ``find_lines(image,
     params)`` returns, with the same stage breakdown as the Hough detector."""
-    times = times or StageTimes()
-    t0 = time.perf_counter()
-    grad = grad or Gradients.of(image, params)
-    t0 = times.add("gradients", t0)
+    grad, times, t0 = detection_start(image, params, grad, times)
     ends = np.asarray(find_lines(image, params), np.float64).reshape(-1, 4)
     t0 = times.add("hough", t0)  # the line-finding stage, for comparable breakdowns
     segments = pieces_on_lines(ends[:, :2], ends[:, 2:], grad, params)

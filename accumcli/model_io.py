@@ -424,7 +424,8 @@ def read_poses(path) -> PoseTrack:
 class Truth:
     """A truth sidecar: edges a, b (E, 3) in the object frame, their kinds, per-edge
     ``seen`` counts (list of (k,) int arrays or None), whether each counts for
-    completeness, and the true poses ``T_camera_object`` by timestamp."""
+    completeness, the true poses ``T_camera_object`` by timestamp, and each pose's own
+    ``seen`` bits where it has them (timestamp_ns -> base64 of numpy.packbits over all samples)."""
 
     object_frame: str
     camera_frame: str
@@ -436,6 +437,7 @@ class Truth:
     times_ns: np.ndarray
     poses: np.ndarray
     meta: dict
+    pose_seen: dict = field(default_factory=dict)
 
     def pose_at(self, t_ns: int, tolerance_ns: int = 1_000_000) -> np.ndarray | None:
         if len(self.times_ns) == 0:
@@ -457,9 +459,10 @@ def read_truth(path) -> Truth:
     except (KeyError, TypeError, ValueError) as e:
         raise FileFormatError(f"{path}: malformed edge ({type(e).__name__}: {e})") from None
     seen = [np.asarray(e["seen"], np.int64) if "seen" in e else None for e in edges]
-    times, poses, _ = _pose_rows(doc, str(path)) if "poses" in doc else (np.zeros(0, np.int64),
-                                                                          np.zeros((0, 4, 4)), [])
+    times, poses, rows = _pose_rows(doc, str(path)) if "poses" in doc else (np.zeros(0, np.int64),
+                                                                             np.zeros((0, 4, 4)), [])
+    pose_seen = {int(r["timestamp_ns"]): r["seen"] for r in rows if isinstance(r.get("seen"), str)}
     return Truth(doc.get("object_frame", ""), doc.get("camera_frame", ""), a, b,
                  [e.get("kind", "") for e in edges], seen,
                  np.array([bool(e.get("completeness", True)) for e in edges]), times, poses,
-                 {k: v for k, v in doc.items() if k not in ("edges", "poses")})
+                 {k: v for k, v in doc.items() if k not in ("edges", "poses")}, pose_seen)

@@ -22,10 +22,9 @@ def check_truth_times(truth, times_ns: np.ndarray, tolerance_ns: int, what, trut
         raise AccumError(f"{truth_path}: no poses to compare (the truth has {len(truth.times_ns)}, "
                          f"{what} has {len(times_ns)})")
     sorted_truth = np.sort(truth.times_ns)
-    i = np.clip(np.searchsorted(sorted_truth, times_ns), 1, len(sorted_truth) - 1) if len(sorted_truth) > 1 \
-        else np.zeros(len(times_ns), int)
-    nearest = np.minimum(np.abs(sorted_truth[i] - times_ns), np.abs(sorted_truth[i - 1] - times_ns)) \
-        if len(sorted_truth) > 1 else np.abs(sorted_truth[0] - times_ns)
+    after = np.clip(np.searchsorted(sorted_truth, times_ns), 0, len(sorted_truth) - 1)
+    before = np.maximum(after - 1, 0)
+    nearest = np.minimum(np.abs(sorted_truth[after] - times_ns), np.abs(sorted_truth[before] - times_ns))
     if not (nearest <= tolerance_ns).any():
         raise AccumError(f"{truth_path}: none of the {len(times_ns)} timestamps of {what} has a truth pose "
                          f"(nearest {nearest.min() * 1e-9:.3f} s away): is it the truth of another recording?")

@@ -55,7 +55,7 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
         check_truth_times(truth, times, TIME_TOLERANCE_NS, path, truth_path)
         per_frame = []
         figures = {**evaluate_frames([(t, s) for t, s, _ in rows], truth, tol, per_frame),
-                   **funnel(rows, truth, truth_path, tol)}
+                   **funnel(rows, truth, tol)}
         if plot:
             from ..plots import plot_frames
 
