@@ -115,8 +115,9 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
                                           f"{rec.camera_frame!r}; nothing was accumulated", result.skipped)
         result.model = acc.model()
         result.refined_frames = len(acc.T_recorded_model)
-        if edges is not None:
-            result.scores = score_segments(result.model.select(result.model.accepted), edges).as_dict()
+        if edges is not None:   # the last row scored this very model
+            result.scores = {"segments": result.accepted,
+                             **{k: result.rows[-1][k] for k in ("precision", "completeness", "background")}}
         for path in outputs:
             if str(path).lower().endswith(".mcap"):
                 continue   # written frame by frame above
