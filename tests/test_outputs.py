@@ -7,6 +7,7 @@ import errno
 import os
 import signal
 import threading
+import time
 
 import pytest
 
@@ -182,6 +183,10 @@ def test_interrupt_during_the_renames_does_not_split_the_set(tmp_path, monkeypat
             with OutputSet(paths) as out:
                 for p in paths:
                     out.open(p).write("new")
+            # A signal the kernel handed to the other thread reaches Python when that thread next runs,
+            # which on a loaded machine can be after the block: wait for it here (bounded), not in pytest.
+            for _ in range(500):
+                time.sleep(0.01)
     finally:
         signal.signal(signal.SIGINT, previous)
         stop.set()
@@ -197,6 +202,8 @@ def test_sigterm_becomes_keyboard_interrupt(tmp_path):
             with OutputSet([tmp_path / "m.json"]) as out:
                 out.open(tmp_path / "m.json").write("new")
                 os.kill(os.getpid(), signal.SIGTERM)
+                for _ in range(500):   # bounded: another thread may take the signal (see above)
+                    time.sleep(0.01)
     finally:
         signal.signal(signal.SIGTERM, previous)
     assert names(tmp_path) == []
