@@ -95,6 +95,15 @@ def interpolate(T0: np.ndarray, T1: np.ndarray, s: float) -> np.ndarray:
     return make_transform(R, (1.0 - s) * T0[:3, 3] + s * T1[:3, 3])
 
 
+def extrapolate(T0: np.ndarray, T1: np.ndarray, s: float) -> np.ndarray:
+    """Pose at fraction ``s`` of the way from T0 to T1 at constant velocity, ``s`` any real (beyond 1:
+    a prediction): the rotation ``exp(s log(R1 R0^T)) R0`` and the origin moving on the line through
+    both translations (an object turning about itself, not about the camera)."""
+    step = Rotation.from_matrix(T1[:3, :3] @ T0[:3, :3].T).as_rotvec()
+    R = Rotation.from_rotvec(s * step).as_matrix() @ T0[:3, :3]
+    return make_transform(R, T0[:3, 3] + s * (T1[:3, 3] - T0[:3, 3]))
+
+
 def rotation_about_point(rotvec: np.ndarray, pivot: np.ndarray, translation) -> np.ndarray:
     """(4, 4) transform ``p -> R (p - pivot) + pivot + translation`` with ``R = exp(rotvec)``
     (rotation vector (3,), radians; pivot and translation (3,), metres): a rotation about

@@ -148,6 +148,12 @@ class Gradients:
         return cls(gx, gy, params.blur_sigma, params.gradient_threshold, params.tensor_sigma)
 
     @cached_property
+    def gxy(self) -> np.ndarray:
+        """(H, W, 2) float32: gx and gy as the two channels of one image, so that one bilinear
+        lookup (``sample``) reads both (tracking samples them at every iteration)."""
+        return np.ascontiguousarray(np.dstack([self.gx, self.gy]))
+
+    @cached_property
     def magnitude(self) -> np.ndarray:
         return np.hypot(self.gx, self.gy)
 
@@ -203,7 +209,8 @@ class StageTimes:
 
 
 def sample(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Bilinear samples of an (H, W) image at pixel coordinates x, y (any shape), as float32."""
+    """Bilinear samples of an (H, W) image at pixel coordinates x, y (any shape), as float32; of an
+    (H, W, C) image, shape + (C,)."""
     shape = np.shape(x)
     n = int(np.prod(shape))
     width = 8192  # cv2.remap needs maps narrower than 32767
@@ -215,7 +222,8 @@ def sample(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         maps.append(flat.reshape(rows, width))
     out = cv2.remap(np.asarray(image, np.float32), maps[0], maps[1], cv2.INTER_LINEAR,
                     borderMode=cv2.BORDER_REPLICATE)
-    return out.ravel()[:n].reshape(shape)
+    channels = out.shape[2:]
+    return out.reshape(-1, *channels)[:n].reshape(*shape, *channels)
 
 
 @dataclass
@@ -575,7 +583,8 @@ def pieces_on_lines(a: np.ndarray, b: np.ndarray, grad: Gradients, params: LineP
     s = np.linspace(-0.4, 0.4, 5)[None, :] * piece_length[:, None]
     x = centers[:, 0:1] + s * directions[:, 0:1]
     y = centers[:, 1:2] + s * directions[:, 1:2]
-    along_normal = (sample(grad.gx, x, y) * normals[:, 0:1] + sample(grad.gy, x, y) * normals[:, 1:2]).mean(axis=1)
+    g = sample(grad.gxy, x, y)
+    along_normal = (g[..., 0] * normals[:, 0:1] + g[..., 1] * normals[:, 1:2]).mean(axis=1)
     line_direction = _canonical(direction)[line]
     # t along the canonical line direction
     t = np.where(np.sum(line_direction * direction[line], axis=1) < 0, -t, t)

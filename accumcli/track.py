@@ -57,7 +57,7 @@ from typing import Callable
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .geometry import (check_points, check_transform, invert, make_transform, pose_error, quat_from_transform,
+from .geometry import (check_points, check_transform, extrapolate, invert, make_transform, pose_error, quat_from_transform,
                        rotate_vectors, rotation_about_point, transform_from_quat, transform_points)
 from .lines2d import Gradients, LineParams, frame_gradients, parabola_peak, sample
 from .recording import StereoFrame, StereoIntrinsics
@@ -85,7 +85,9 @@ class TrackParams:
     ransac_hypotheses: int = 5               # distinct RANSAC poses refined on the images
     reacquire_tukey_px: tuple = (32.0, 20.0, 12.0, 6.0, 4.0, 2.5)
     blur_sigma: float = 1.0                  # of the images before their gradients, px
-    fine_start_px: float = 12.0              # a start that verifies skips the wider levels
+    fine_start_px: float = 12.0              # a start that covers min_coverage skips the wider levels
+    converged_rad: float = 1e-4              # a Gauss-Newton step smaller than this (0.006 deg) and
+    converged_m: float = 1e-5                # 0.01 mm ends the level: far below the poses' std
     level_slack: float = 0.05                # a level's pose is kept unless its coverage falls by more
     min_coverage: float = 0.5                # of the visible model's points on an edge in both images
     max_std_deg: float = 0.3                 # of the last Gauss-Newton step, per axis: the pose is determined
@@ -93,6 +95,8 @@ class TrackParams:
     min_margin: float = 0.1                  # coverage over the best distinct alternative pose, else ambiguous
     distinct_deg: float = 3.0                # poses further apart than this (or distinct_m) are alternatives
     distinct_m: float = 0.005
+    max_jump_deg: float = 30.0               # a pose this far from the motion prediction is not believed
+    max_jump_m: float = 0.05                 # (while the last tracked frame is at most max_gap_s ago)
 
 
 @dataclass
@@ -183,13 +187,15 @@ def _measure(points_cam, dirs_cam, intr: StereoIntrinsics, grads: tuple, search:
         normal = np.column_stack([-d[:, 1], d[:, 0]])
         x = uv[:, :1] + steps[None, :] * normal[:, :1]
         y = uv[:, 1:] + steps[None, :] * normal[:, 1:]
-        gx, gy = sample(grad.gx, x, y), sample(grad.gy, x, y)
+        g = sample(grad.gxy, x, y)
+        gx, gy = g[..., 0], g[..., 1]
         along = np.abs(gx * normal[:, :1] + gy * normal[:, 1:])
         good = (along >= params.min_gradient) & (along >= params.min_orientation_cos * np.hypot(gx, gy))
         peak = np.zeros_like(good)
         peak[:, 1:-1] = good[:, 1:-1] & (along[:, 1:-1] >= along[:, :-2]) & (along[:, 1:-1] > along[:, 2:])
         strength = np.where(peak, along, 0.0)
-        order = np.argsort(-strength, axis=1)[:, : params.candidates]                   # (S, C)
+        k = min(params.candidates, strength.shape[1] - 1)
+        order = np.argpartition(-strength, k, axis=1)[:, :k]                    # (S, C), the strongest
         rows = np.arange(len(uv))[:, None]
         m0, m1, m2 = along[rows, order - 1], along[rows, order], along[rows, np.minimum(order + 1, len(steps) - 1)]
         sub = parabola_peak(m0, m1, m2)
@@ -207,9 +213,12 @@ def _residuals(P, measurements, intr: StereoIntrinsics):
         uv = projected[side]
         moved = np.sum((uv - uv0) * normal, axis=1)                       # along the normal since measuring
         gaps = moved[:, None] - candidates
-        nearest = np.nanargmin(np.where(np.isnan(gaps), np.inf, np.abs(gaps)), axis=1)
-        r = gaps[np.arange(len(gaps)), nearest]
-        out.append((np.nan_to_num(r), ~np.isnan(r), normal))
+        distance = np.abs(gaps)
+        distance[np.isnan(distance)] = np.inf
+        nearest = np.argmin(distance, axis=1)[:, None]
+        r = np.take_along_axis(gaps, nearest, axis=1)[:, 0]
+        found = ~np.isnan(r)
+        out.append((np.where(found, r, 0.0), found, normal))
     return out
 
 
@@ -218,11 +227,16 @@ def _jacobian(points_cam: np.ndarray, normal: np.ndarray, intr: StereoIntrinsics
     """(S, 6) derivative of n . pi(P) for an increment (rotation vector about ``pivot``,
     translation), both in the camera frame."""
     X, Y, Z = points_cam[:, 0] - intr.baseline * side, points_cam[:, 1], points_cam[:, 2]
-    du = np.column_stack([intr.fx / Z, np.zeros_like(Z), -intr.fx * X / Z ** 2])
-    dv = np.column_stack([np.zeros_like(Z), intr.fy / Z, -intr.fy * Y / Z ** 2])
-    dpi = normal[:, :1] * du + normal[:, 1:] * dv                    # (S, 3): n^T dpi/dP
-    rotation = np.cross(points_cam - pivot, dpi)  # n^T dpi/dP (-[P - c]x) w = ((P - c) x dpi) . w
-    return np.column_stack([rotation, dpi])
+    J = np.empty((len(Z), 6))
+    nu, nv = normal[:, 0] / Z, normal[:, 1] / Z
+    dpi = J[:, 3:]                                     # n^T dpi/dP (S, 3), written in place
+    dpi[:, 0], dpi[:, 1] = intr.fx * nu, intr.fy * nv
+    dpi[:, 2] = -(intr.fx * nu * X + intr.fy * nv * Y) / Z
+    a = points_cam - pivot        # n^T dpi/dP (-[P - c]x) w = ((P - c) x dpi) . w
+    J[:, 0] = a[:, 1] * dpi[:, 2] - a[:, 2] * dpi[:, 1]
+    J[:, 1] = a[:, 2] * dpi[:, 0] - a[:, 0] * dpi[:, 2]
+    J[:, 2] = a[:, 0] * dpi[:, 1] - a[:, 1] * dpi[:, 0]
+    return J
 
 
 def _gradients(frame: StereoFrame, params: TrackParams, gradients: tuple | None) -> tuple[Gradients, Gradients]:
@@ -241,27 +255,50 @@ def refine_pose(model: Segments, frame: StereoFrame, T_init: np.ndarray, params:
     ``extract_frame(...).gradients``); used when their ``blur_sigma`` is ``params.blur_sigma``.
 
     Coarse to fine, each level (``search_px``, ``tukey_px``) starts from the pose kept so far; the
-    level's result is kept unless its verification (``_verify`` at the finest search) turns
-    'tracked' into 'lost' or its coverage falls more than ``level_slack`` under the best seen: a
-    wide search that jumps to clutter cannot spoil a good start. A start that verifies already runs
-    only the levels searching at most ``fine_start_px``. A 'lost' estimate that found nothing better (too little in view, too few
+    result of a wide level (searching more than ``fine_start_px``) and of the last level is kept
+    unless its verification (``_verify`` at the finest search) turns 'tracked' into 'lost' or its
+    coverage falls more than ``level_slack`` under the best seen: a wide search that jumps to clutter
+    cannot spoil a good start. The fine levels follow each other unverified (they move the pose by a
+    few pixels at most; verifying each cost a fifth of the tracking time). A start whose coverage is already
+    ``min_coverage`` (half the visible model within ``inlier_px`` of an edge in both images) runs only
+    the levels searching at most ``fine_start_px``. A 'lost' estimate that found nothing better (too little in view, too few
     edges) keeps ``T_init``. Raises ``InputError`` if ``T_init`` is not a rigid transform."""
     T_init = check_transform(T_init, "T_init (T_camera_object)")
-    intr = frame.intrinsics
     grads = _gradients(frame, params, gradients)
+    return _refine_from(start_estimate(model, frame, T_init, params, grads), model, frame, params, grads,
+                        search_px, tukey_px)
+
+
+def start_estimate(model: Segments, frame: StereoFrame, T_init: np.ndarray, params: TrackParams,
+                   grads: tuple[Gradients, Gradients]) -> PoseEstimate:
+    """The verification of the unrefined pose ``T_init`` at the finest search (how good a start it is)."""
+    accepted = model.select(model.accepted) if len(model) else model
+    return _verify_at(accepted, T_init, frame.intrinsics, grads, params.search_px[-1], params.tukey_px[-1], params)
+
+
+def _refine_from(best: PoseEstimate, model: Segments, frame: StereoFrame, params: TrackParams,
+                 grads: tuple[Gradients, Gradients], search_px: tuple | None = None,
+                 tukey_px: tuple | None = None) -> PoseEstimate:
+    """``refine_pose`` from a start already verified (``start_estimate``)."""
+    intr = frame.intrinsics
     accepted = model.select(model.accepted) if len(model) else model
     search_px, tukey_px = search_px or params.search_px, tukey_px or params.tukey_px
-    best = _verify_at(accepted, T_init, intr, grads, search_px[-1], tukey_px[-1], params)
     peak = best.coverage
     levels = list(zip(search_px, tukey_px))
-    if best.status == "tracked":      # the start verifies: only the fine levels (at most fine_start_px)
+    if best.coverage >= params.min_coverage:   # the start is close already: only the fine levels (<= fine_start_px)
         levels = [(s, t) for s, t in levels if s <= params.fine_start_px] or levels[-1:]
-    for search, tukey in levels:
-        T = _gauss_newton(accepted, best.T_camera_object, intr, grads, search, tukey, params)
-        if T is not None:
-            found = _verify_at(accepted, T, intr, grads, search_px[-1], tukey_px[-1], params)
-            if (found.status == "tracked") >= (best.status == "tracked") and found.coverage >= peak - params.level_slack:
-                best, peak = found, max(peak, found.coverage)
+    current = best.T_camera_object
+    for i, (search, tukey) in enumerate(levels):
+        T = _gauss_newton(accepted, current, intr, grads, search, tukey, params)
+        if T is None:
+            continue
+        current = T
+        if (search <= params.fine_start_px and i < len(levels) - 1) or _same_pose(T, best.T_camera_object, params):
+            continue            # the fine levels follow each other; the last one is verified
+        found = _verify_at(accepted, T, intr, grads, search_px[-1], tukey_px[-1], params)
+        if (found.status == "tracked") >= (best.status == "tracked") and found.coverage >= peak - params.level_slack:
+            best, peak = found, max(peak, found.coverage)
+        current = best.T_camera_object
     return best
 
 
@@ -298,9 +335,16 @@ def _gauss_newton(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, gra
         H = (J * w[:, None]).T @ J + 1e-6 * np.eye(6)
         step = np.linalg.solve(H, -(J * w[:, None]).T @ r)
         T = rotation_about_point(step[:3], pivot, step[3:]) @ T
-        if np.linalg.norm(step[:3]) < 1e-5 and np.linalg.norm(step[3:]) < 1e-6:
+        if np.linalg.norm(step[:3]) < params.converged_rad and np.linalg.norm(step[3:]) < params.converged_m:
             break
     return _rigid(T)
+
+
+def _same_pose(A: np.ndarray, B: np.ndarray, params: TrackParams) -> bool:
+    """Whether two poses differ by less than one converged Gauss-Newton step (their verification
+    would be the same: it is not measured again)."""
+    return (np.linalg.norm(A[:3, 3] - B[:3, 3]) < params.converged_m
+            and np.arccos(np.clip((np.trace(A[:3, :3] @ B[:3, :3].T) - 1) / 2, -1, 1)) < params.converged_rad)
 
 
 def _rigid(T: np.ndarray) -> np.ndarray:
@@ -544,8 +588,7 @@ class PoseTracker:
 
     model: Segments
     params: TrackParams = field(default_factory=TrackParams)
-    history: list = field(default_factory=list)   # the last two tracked poses
-    last_time_ns: int | None = None               # of the last tracked frame
+    history: list = field(default_factory=list)   # the last two tracked frames: (timestamp_ns, T_camera_object)
 
     def __post_init__(self):
         check_points(self.model.centers, "model segment centres")
@@ -566,15 +609,33 @@ class PoseTracker:
             self._symmetries = found + [invert(T) for T in found]      # a shift by one square and back
         return self._symmetries
 
-    def predict(self) -> list[np.ndarray]:
-        """Starting poses: constant velocity in the camera frame, and the last pose (the motion may
-        have turned back: a hand-held or swinging object often does)."""
+    def predict(self, time_ns: int) -> list[np.ndarray]:
+        """Starting poses for a frame at ``time_ns``: constant velocity (``geometry.extrapolate`` from
+        the last two tracked frames, scaled by their times: a frame lost in between does not double the
+        step), and the last pose (the motion may have turned back: a hand-held or swinging object often
+        does)."""
         if not self.history:
             return []
+        last_ns, last = self.history[-1]
         if len(self.history) == 1:
-            return [self.history[-1]]
-        previous, last = self.history[-2], self.history[-1]
-        return [_rigid((last @ invert(previous)) @ last), last]
+            return [last]
+        previous_ns, previous = self.history[-2]
+        s = (time_ns - previous_ns) / max(last_ns - previous_ns, 1)
+        return [_rigid(extrapolate(previous, last, s)), last]
+
+    def _implausible(self, estimate: PoseEstimate, time_ns: int) -> str:
+        """Why ``estimate`` cannot be the object's pose given its recent motion ('' if it can): more than
+        ``max_jump_deg`` or ``max_jump_m`` from the constant-velocity prediction while the last tracked
+        frame is at most ``max_gap_s`` old. A re-acquisition may find a symmetric twin (a box's half
+        turn) whose image evidence is as good as the true pose's; the motion tells them apart."""
+        p = self.params
+        if not self.history or (time_ns - self.history[-1][0]) * 1e-9 > p.max_gap_s:
+            return ""
+        rotation, translation = pose_error(estimate.T_camera_object, self.predict(time_ns)[0])
+        if rotation <= p.max_jump_deg and translation <= p.max_jump_m:
+            return ""
+        return (f"{rotation:.0f} deg and {translation * 1000:.0f} mm from the motion prediction "
+                f"(at most {p.max_jump_deg:.0f} deg and {p.max_jump_m * 1000:.0f} mm)")
 
     def update(self, frame: StereoFrame, T_guess: np.ndarray | None = None,
                observe: Callable[[], Segments] | None = None,
@@ -601,13 +662,19 @@ class PoseTracker:
         if T_guess is not None:
             T_guess = check_transform(T_guess, "T_guess (T_camera_object)")
         grads = _gradients(frame, p, gradients)
-        gap = None if self.last_time_ns is None else (frame.timestamp_ns - self.last_time_ns) * 1e-9
-        reacquiring = T_guess is None and (not self.history or gap is None or gap > p.max_gap_s)
-        guesses = [T_guess] if T_guess is not None else self.predict()
-        # from both: the one that verifies better wins (decide)
-        candidates = [refine_pose(self.model, frame, guess, p, grads) for guess in guesses]
+        gap = (frame.timestamp_ns - self.history[-1][0]) * 1e-9 if self.history else None
+        reacquiring = T_guess is None and (gap is None or gap > p.max_gap_s)
+        guesses = [T_guess] if T_guess is not None else self.predict(frame.timestamp_ns)
+        # the better start first; the other too unless the first verifies and the two are not distinct
+        # (within distinct_deg, distinct_m: they would end at the same pose, or be called ambiguous)
+        starts = sorted((start_estimate(self.model, frame, guess, p, grads) for guess in guesses), key=_rank,
+                        reverse=True)
+        candidates = []
+        for start in starts:
+            if not (candidates and candidates[0].status == "tracked" and not _distinct(start, starts[0], p)):
+                candidates.append(_refine_from(start, self.model, frame, p, grads))
         if not reacquiring and candidates and not any(c.status == "tracked" for c in candidates) and self.history:
-            wide = refine_pose(self.model, frame, self.history[-1], p, grads, p.reacquire_search_px,
+            wide = refine_pose(self.model, frame, self.history[-1][1], p, grads, p.reacquire_search_px,
                                p.reacquire_tukey_px)
             wide.method = "wide"
             candidates.append(wide)
@@ -642,6 +709,10 @@ class PoseTracker:
                                 f"(needs {p.min_support_fraction:.0%})")
             if ransac.reason:
                 reacquisition = f"re-acquisition: {ransac.reason}"
+        for c in candidates:
+            why = self._implausible(c, frame.timestamp_ns) if c.status == "tracked" and T_guess is None else ""
+            if why:
+                c.status, c.reason = "lost", why
         best = decide(candidates, p)
         if best is None:
             best = PoseEstimate(np.full((4, 4), np.nan), float("inf"), 0, 0, "lost",
@@ -651,6 +722,5 @@ class PoseTracker:
         if best.status == "lost" and ran:
             best.T_camera_object = np.full((4, 4), np.nan)     # a re-acquisition returns a verified pose or none
         if best.status == "tracked":
-            self.history = (self.history + [best.T_camera_object])[-2:]
-            self.last_time_ns = frame.timestamp_ns
+            self.history = (self.history + [(frame.timestamp_ns, best.T_camera_object)])[-2:]
         return best

@@ -114,3 +114,17 @@ def test_check_transform_projects_a_slightly_drifted_rotation_back_onto_a_rotati
     out = check_transform(T)
     assert np.abs(out[:3, :3].T @ out[:3, :3] - np.eye(3)).max() < 1e-12
     assert np.abs(out - T).max() < 1e-4
+
+
+def test_extrapolate_interpolates_inside_and_keeps_the_velocity_beyond():
+    from accumcli.geometry import extrapolate, interpolate, pose_error
+
+    T0 = make_transform(Rotation.from_rotvec([0.1, -0.2, 0.3]).as_matrix(), [0.1, 0.0, 0.5])
+    step = Rotation.from_rotvec(np.radians([0.0, 5.0, 0.0])).as_matrix()
+    T1 = make_transform(step @ T0[:3, :3], [0.11, 0.002, 0.49])
+    assert np.allclose(extrapolate(T0, T1, 0.0), T0) and np.allclose(extrapolate(T0, T1, 1.0), T1)
+    assert np.allclose(extrapolate(T0, T1, 0.3), interpolate(T0, T1, 0.3))
+    T3 = extrapolate(T0, T1, 3.0)                  # two more steps of 5 degrees, 10 mm and 2 mm
+    assert pose_error(T3, T0)[0] == pytest.approx(15.0)
+    assert np.allclose(T3[:3, 3], [0.13, 0.006, 0.47])
+    assert np.allclose(T3[:3, :3], step @ step @ step @ T0[:3, :3])

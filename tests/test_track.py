@@ -225,7 +225,7 @@ def test_reacquisition_without_3d_support_is_lost_with_a_reason(noisy_pair, mode
     exact, _ = noisy_pair
     with Recording(exact) as rec:
         frame = next(iter(rec.frames(0, 1)))
-    tracker = PoseTracker(model_of_exact, history=[frame.T_camera_object], last_time_ns=frame.timestamp_ns - 10**10)
+    tracker = PoseTracker(model_of_exact, history=[(frame.timestamp_ns - 10**10, frame.T_camera_object)])
     unrelated = _box_model().transformed(make_transform(np.eye(3), [0.3, 0.3, 2.0]), "camera_left")   # 10 s gap
     estimate = tracker.update(frame, None, lambda: unrelated)
     assert estimate.status == "lost" and estimate.inliers >= 30     # the images agree, the 3D segments do not
@@ -332,3 +332,31 @@ def test_every_tracked_frame_of_the_track_command_is_right(noisy_pair, tmp_path)
     figures = json.loads(runner.invoke(main, ["eval", str(poses), exact.replace(".mcap", ".truth.json"),
                                               "--json"]).output)
     assert figures["max_rotation_deg"] < 3.0 and figures["max_translation_mm"] < 5.0
+
+
+def test_prediction_scales_the_last_step_by_the_time_since_it():
+    """A frame lost in between: the prediction goes on at the tracked velocity, not at one step per frame."""
+    from accumcli.geometry import extrapolate
+
+    tracker = PoseTracker(_box_model())
+    T0 = T_FRONT
+    T1 = perturbed(T_FRONT, 4.0, 0.003)
+    tracker.history = [(0, T0), (100_000_000, T1)]
+    predicted, last = tracker.predict(300_000_000)             # two steps after the last tracked frame
+    assert np.allclose(predicted, extrapolate(T0, T1, 3.0), atol=1e-9) and np.array_equal(last, T1)
+    assert pose_error(predicted, T1)[0] == pytest.approx(8.0, abs=1e-6)
+
+
+def test_a_pose_far_from_the_motion_prediction_is_not_tracked():
+    """A re-acquired half turn (a box's symmetric twin) 0.2 s after the last tracked frame is implausible;
+    a second later the motion is unknown and the same pose is judged by the images alone."""
+    from accumcli.track import PoseEstimate
+
+    tracker = PoseTracker(_box_model())
+    tracker.history = [(0, T_FRONT), (100_000_000, T_FRONT)]
+    half_turn = make_transform(Rotation.from_rotvec([0, 0, np.pi]).as_matrix(), [0.0, 0.0, 0.5])
+    flipped = PoseEstimate(half_turn, 0.3, 200, 210, "tracked", coverage=0.8)
+    assert "180 deg and 0 mm from the motion prediction" in tracker._implausible(flipped, 300_000_000)
+    near = PoseEstimate(perturbed(T_FRONT, 10.0, 0.01), 0.3, 200, 210, "tracked", coverage=0.8)
+    assert tracker._implausible(near, 300_000_000) == ""
+    assert tracker._implausible(flipped, 1_000_000_000) == ""
