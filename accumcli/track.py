@@ -31,9 +31,11 @@ than ``min_margin`` is ``ambiguous`` and keeps the alternatives. Every estimate 
 figures and the standard deviations of its last Gauss-Newton step (``PoseEstimate.figures``).
 
 ``PoseTracker`` follows a sequence. It refines from both the constant-velocity
-prediction and the last pose (an object swung back and forth turns back between frames; trying
-only the last pose when the prediction verifies let small drifts through on dev_steps_track);
-when neither verifies, also
+prediction (scaled by the time since the last tracked frame) and the last pose (an object swung
+back and forth turns back between frames; trying only the last pose when the prediction verifies
+let small drifts through on dev_steps_track), the better start first and the other only when the
+first fails or the two are distinct (``distinct_deg``, ``distinct_m``: closer starts end at the
+same pose, and refining both took half the tracking time); when neither verifies, also
 from the last pose with a wide search (``reacquire_search_px``; not on a
 re-acquisition). Whenever none of these is verified, and
 always when there is no tracked frame yet or the last one is more than
@@ -46,7 +48,10 @@ most model segments onto extracted ones are refined on the images, and the
 refined ones count only if enough model segments find a 3D counterpart there
 (``min_support_fraction``); the model's near-symmetries (``PoseTracker.symmetries``) applied to the
 best one are refined too, so that a symmetric model is ``ambiguous`` rather than wrongly ``tracked``.
-A re-acquisition that verifies nothing returns no pose.
+A re-acquisition that verifies nothing returns no pose. While the last tracked frame is at most
+``max_gap_s`` old, a pose more than ``max_jump_deg`` or ``max_jump_m`` from the motion prediction
+is not believed whatever the images say (``lost``): a re-acquired symmetric twin (a box's half turn)
+can verify as well as the true pose.
 """
 
 from __future__ import annotations
