@@ -66,8 +66,12 @@ def accumulation_lines(result, motion: str = "gripper") -> list[str]:
 
 def tracking_lines(result) -> list[str]:
     n = result.frames
-    return [f"{n} frames: {result.tracked} tracked ({result.tracked / max(n, 1):.0%}), median residual "
-            f"{result.median_residual_px:.2f} px, {result.frames_per_second:.1f} frames/s"]
+    lines = [f"{n} frames: {result.tracked} tracked ({result.tracked / max(n, 1):.0%}), median residual "
+             f"{result.median_residual_px:.2f} px, {result.frames_per_second:.1f} frames/s"]
+    if result.params is not None:
+        lines.append(f"limits from the first frame: RMS <= {result.params.max_rms_px:.2f} px, inlier share >= "
+                     f"{result.params.min_inlier_fraction:.2f}")
+    return lines
 
 
 def figures_lines(figures: dict) -> list[str]:

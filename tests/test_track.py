@@ -360,3 +360,24 @@ def test_a_pose_far_from_the_motion_prediction_is_not_tracked():
     near = PoseEstimate(perturbed(T_FRONT, 10.0, 0.01), 0.3, 200, 210, "tracked", coverage=0.8)
     assert tracker._implausible(near, 300_000_000) == ""
     assert tracker._implausible(flipped, 1_000_000_000) == ""
+
+
+def test_residual_limits_are_calibrated_on_the_first_given_pose_within_bounds():
+    """Real images leave 0.7 px and 85 % inliers at the right pose: the limits follow, capped; a clean
+    first frame leaves the defaults; a first frame with nothing measured changes nothing."""
+    from accumcli.track import PoseEstimate, TrackParams, calibrated, judge
+
+    p = TrackParams()
+    real = calibrated(p, PoseEstimate(T_FRONT, 0.71, 610, 719, "lost", coverage=0.6))
+    assert real.max_rms_px == pytest.approx(0.8) and real.min_inlier_fraction == pytest.approx(0.80)
+    mild = calibrated(p, PoseEstimate(T_FRONT, 0.55, 460, 500, "tracked", coverage=0.6))
+    assert mild.max_rms_px == pytest.approx(0.66) and mild.min_inlier_fraction == pytest.approx(0.87)
+    clean = calibrated(p, PoseEstimate(T_FRONT, 0.3, 480, 490, "tracked", coverage=0.8))
+    assert (clean.max_rms_px, clean.min_inlier_fraction) == (p.max_rms_px, p.min_inlier_fraction)
+    assert calibrated(p, PoseEstimate(T_FRONT, float("inf"), 0, 0, "lost")) == p
+    frame = PoseEstimate(T_FRONT, 0.72, 600, 700, "lost", coverage=0.6, std_rotation_deg=np.full(3, 0.05),
+                         std_translation_mm=np.full(3, 0.1))
+    assert judge(frame, p).status == "lost" and "RMS 0.72 px" in frame.reason
+    assert judge(frame, real).status == "tracked" and frame.reason == ""
+    few = PoseEstimate(T_FRONT, float("inf"), 0, 0, "lost", reason="2 accepted model segments in view (needs 3)")
+    assert judge(few, real).reason == "2 accepted model segments in view (needs 3)"

@@ -28,6 +28,7 @@ class TrackingResult:
     track: PoseTrack
     seconds: float = 0.0
     outputs: list = field(default_factory=list)
+    params: TrackParams | None = None      # the limits used (calibrated on the first frame: ``track.calibrated``)
 
     @property
     def frames(self) -> int:
@@ -108,4 +109,4 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
                                  child_frame_id=poses_child_frame or f"{rec.object_frame}_tracked")
             else:
                 write_poses(files.open(path), track)
-    return TrackingResult(track, time.perf_counter() - t0, [str(p) for p in (*outputs, rrd) if p])
+    return TrackingResult(track, time.perf_counter() - t0, [str(p) for p in (*outputs, rrd) if p], tracker.params)
