@@ -22,6 +22,7 @@ from .cli_options import (
     number_pair,
     parse_pose,
     recording_options,
+    frame_workers_option,
     workers_option,
 )
 from .errors import AccumError
@@ -236,7 +237,7 @@ def simulate(output, count, size, scene, shape, seed, size_mm, distance, contras
 @click.option("--rrd", type=click.Path(dir_okay=False),
               help="Also save a Rerun recording of each frame's images, 2D and 3D segments.")
 @click.option("--with-2d", is_flag=True, help="Also write each frame's left 2D segments (for the funnel of eval).")
-@workers_option
+@frame_workers_option
 @frames_option
 @extraction_options
 @recording_options
@@ -288,7 +289,7 @@ def extract(recording, output, rrd, with_2d, workers, frames, extract_params, op
 @click.option("--so", "angle_threshold", type=click.FloatRange(0.5, 45.0), default=7.0, show_default=True,
               metavar="DEG",
               help="s_o of the paper's metric, degrees.")
-@workers_option
+@frame_workers_option
 @frames_option
 @extraction_options
 @recording_options

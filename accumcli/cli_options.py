@@ -30,8 +30,21 @@ def _parse_frames(text):
 
 workers_option = click.option(
     "--workers", type=click.IntRange(min=1), default=1, show_default=True,
-    help="Worker processes (extract, accumulate: frames extracted ahead; batch: recordings at once). The "
-         "output is the same whatever the number.")
+    help="Recordings processed at once. The output is the same whatever the number.")
+
+
+def _parse_workers(text: str) -> int | None:
+    if text == "auto":
+        return None
+    if text.isdigit() and int(text) >= 1:
+        return int(text)
+    raise click.BadParameter(f"expected a number of processes (1 or more) or 'auto', got {text!r}")
+
+
+frame_workers_option = click.option(
+    "--workers", default="auto", show_default=True, metavar="N|auto",
+    callback=lambda ctx, param, value: _parse_workers(value), help="Processes extracting frames ahead of this one (auto: 2 on two or more CPUs for "
+    "12 frames or more, else 1). The output is the same whatever the number.")
 
 frames_option = click.option("--frames", "frames", default="0:", callback=library_value(_parse_frames),
                              metavar="START:STOP", help="Stereo frames to use (0-based, STOP excluded; "

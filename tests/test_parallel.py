@@ -14,3 +14,29 @@ def test_two_workers_give_the_same_model_and_frames_bytes(small_recording, tmp_p
         outputs[workers] = (model.read_bytes(), frames.read_bytes(), result.frames, sorted(result.times.seconds))
     assert outputs[1] == outputs[2]
     assert outputs[1][2] == 4 and "hough" in outputs[1][3]   # stage times come back from the workers
+
+
+def test_auto_workers_use_both_cores_only_for_recordings_long_enough(monkeypatch):
+    import os
+
+    from accumcli.runs.parallel import AUTO_MIN_FRAMES, resolve_workers
+
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1, 2, 3}, raising=False)
+    assert resolve_workers(None, AUTO_MIN_FRAMES) == 2 and resolve_workers(None, AUTO_MIN_FRAMES - 1) == 1
+    assert resolve_workers(3, 2) == 3
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0}, raising=False)
+    assert resolve_workers(None, 1000) == 1
+
+
+def test_workers_option_takes_a_count_or_auto(small_recording, tmp_path):
+    from click.testing import CliRunner
+
+    from accumcli.cli import main
+
+    runner = CliRunner()
+    bad = runner.invoke(main, ["extract", small_recording, "-o", str(tmp_path / "f.jsonl"), "--workers", "0"])
+    assert bad.exit_code != 0 and "expected a number of processes (1 or more) or 'auto'" in bad.output
+    auto, one = tmp_path / "auto.jsonl", tmp_path / "one.jsonl"
+    assert runner.invoke(main, ["extract", small_recording, "-o", str(auto)]).exit_code == 0
+    assert runner.invoke(main, ["extract", small_recording, "-o", str(one), "--workers", "1"]).exit_code == 0
+    assert auto.read_bytes() == one.read_bytes()

@@ -18,7 +18,7 @@ from ..segments import Segments
 from .base import FrameRange, Progress, RecordingOptions, no_progress, nothing_done
 from .checks import check_truth_matches
 from .frame_logs import rerun_log, scene_log
-from .parallel import extracted_frames
+from .parallel import extracted_frames, resolve_workers
 
 log = logging.getLogger("accumcli")
 
@@ -53,7 +53,7 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
                          options: RecordingOptions = RecordingOptions(), frames: FrameRange = FrameRange(),
                          truth=None, history=None, plot=None, rrd=None, png=None, panel=None,
                          ply_all: bool = False,
-                         workers: int = 1, progress: Progress = no_progress) -> AccumulationResult:
+                         workers: int | None = 1, progress: Progress = no_progress) -> AccumulationResult:
     """Accumulate the frames in ``frames`` of ``recording`` into one model.
 
     outputs: model files, ``.json`` (accum.model/1), ``.ply`` (accepted segments; all with
@@ -63,7 +63,7 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
     frames (``plots``); rrd: a Rerun recording; png / panel: pictures of the model and of the last
     frame. All outputs are checked before the work and written together at the end. workers: processes
     extracting the next frames while this one accumulates (``runs.parallel``; the same model bytes
-    whatever the number).
+    whatever the number; None: ``parallel.resolve_workers``).
     """
     files = OutputSet([*outputs, history, plot, rrd, png, panel])
     edges = None
@@ -92,7 +92,7 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
 
         with rerun_log(files, rrd, "accumulate") as viz, scene_log(files, outputs) as scenes, \
                 LimitedWarnings(log) as no_pose:
-            for frame, extraction in extracted_frames(frames_with_pose(), params.extract, rec.camera_frame, workers,
+            for frame, extraction in extracted_frames(frames_with_pose(), params.extract, rec.camera_frame, resolve_workers(workers, total),
                                                       acc.times):
                 step = acc.step(frame, frame.T_camera_object, extraction)
                 row = {"frame_index": frame.index, "timestamp_ns": frame.timestamp_ns, **step.stats.__dict__}

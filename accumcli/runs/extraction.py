@@ -14,7 +14,7 @@ from ..model_io import FramesWriter
 from ..outputs import OutputSet
 from .base import FrameRange, Progress, RecordingOptions, no_progress, nothing_done
 from .frame_logs import rerun_log
-from .parallel import extracted_frames
+from .parallel import extracted_frames, resolve_workers
 
 
 @dataclass
@@ -38,14 +38,15 @@ class ExtractionResult:
 
 def extract_recording(recording, output, *, params: ExtractParams = ExtractParams(),
                       options: RecordingOptions = RecordingOptions(), frames: FrameRange = FrameRange(),
-                      rrd=None, with_2d: bool = False, workers: int = 1,
+                      rrd=None, with_2d: bool = False, workers: int | None = 1,
                       progress: Progress = no_progress) -> ExtractionResult:
     """Extract every stereo frame in ``frames`` of ``recording`` into ``output`` (JSON lines, one
     model-format object per frame in the left camera frame, with the recorded pose where there is
     one; formats.md), and the rectified intrinsics. ``with_2d``: each line also carries the left
     2D segments (``segments_2d``: endpoints u0, v0, u1, v1 px, the indices of those that became 3D
     segments, and the critical angle) for the funnel of ``accum eval``. ``rrd``: also a Rerun
-    recording. ``workers``: extracting processes (the same bytes whatever the number). Needs no
+    recording. ``workers``: extracting processes (the same bytes whatever the number; None:
+    ``parallel.resolve_workers``). Needs no
     object pose."""
     outputs = OutputSet([output, rrd])
     result = ExtractionResult(outputs=[p for p in (output, rrd) if p])
@@ -54,7 +55,7 @@ def extract_recording(recording, output, *, params: ExtractParams = ExtractParam
         total = frames.check(rec)
         with FramesWriter(outputs.open(output)) as out, rerun_log(outputs, rrd, "extract") as viz:
             for frame, extraction in extracted_frames(rec.frames(frames.start, frames.stop), params,
-                                                      rec.camera_frame, workers, result.times):
+                                                      rec.camera_frame, resolve_workers(workers, total), result.times):
                 header = {"frame_index": frame.index, "counts": extraction.counts,
                           "intrinsics": frame.intrinsics.as_dict()}
                 if with_2d:
