@@ -25,10 +25,10 @@ least ``min_inliers`` distances (and ``min_inlier_fraction`` of those measured) 
 ``inlier_px``, their RMS is at most ``max_rms_px``, the last Gauss-Newton step's standard deviations
 are at most ``max_std_deg`` and ``max_std_mm`` on every axis, and the coverage (the share of the visible
 model's sample points on an edge in both images, i.e. at the pose's disparity) is at least
-``min_coverage``; otherwise ``lost`` (``judge``). ``PoseTracker`` adapts the RMS and inlier-share limits
-once, on the refinement of the first frame's given pose (``calibrated``). The tracker then compares the candidate poses of a frame
-(``decide``): a verified pose whose coverage exceeds that of a distinct verified alternative by less
-than ``min_margin`` is ``ambiguous`` and keeps the alternatives. Every estimate carries its
+``min_coverage``; otherwise ``lost`` (``judge``). ``PoseTracker`` adapts the RMS and inlier-share
+limits once, on the refinement of the first frame's given pose (``calibrated``). The tracker then
+compares the candidate poses of a frame (``decide``): a verified pose whose coverage exceeds that of
+a distinct verified alternative by less than ``min_margin`` is ``ambiguous`` and keeps the alternatives. Every estimate carries its
 figures and the standard deviations of its last Gauss-Newton step (``PoseEstimate.figures``).
 
 ``PoseTracker`` follows a sequence. It refines from both the constant-velocity
@@ -63,8 +63,8 @@ from typing import Callable
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .geometry import (check_points, check_transform, extrapolate, invert, make_transform, pose_error, quat_from_transform,
-                       rotate_vectors, rotation_about_point, transform_from_quat, transform_points)
+from .geometry import (check_points, check_transform, extrapolate, invert, make_transform, pose_error,
+                       quat_from_transform, rotate_vectors, rotation_about_point, transform_from_quat, transform_points)
 from .lines2d import Gradients, LineParams, frame_gradients, parabola_peak, sample
 from .recording import StereoFrame, StereoIntrinsics
 from .segments import Segments
@@ -270,10 +270,10 @@ def refine_pose(model: Segments, frame: StereoFrame, T_init: np.ndarray, params:
     unless its verification (``_verify`` at the finest search) turns 'tracked' into 'lost' or its
     coverage falls more than ``level_slack`` under the best seen: a wide search that jumps to clutter
     cannot spoil a good start. The fine levels follow each other unverified (they move the pose by a
-    few pixels at most; verifying each cost a fifth of the tracking time). A start whose coverage is already
-    ``min_coverage`` (half the visible model within ``inlier_px`` of an edge in both images) runs only
-    the levels searching at most ``fine_start_px``. A 'lost' estimate that found nothing better (too little in view, too few
-    edges) keeps ``T_init``. Raises ``InputError`` if ``T_init`` is not a rigid transform."""
+    few pixels at most; verifying each cost a fifth of the tracking time). A start whose coverage is
+    already ``min_coverage`` (half the visible model within ``inlier_px`` of an edge in both images)
+    runs only the levels searching at most ``fine_start_px``. A 'lost' estimate that found nothing
+    better (too little in view, too few edges) keeps ``T_init``. Raises ``InputError`` if ``T_init`` is not a rigid transform."""
     T_init = check_transform(T_init, "T_init (T_camera_object)")
     grads = _gradients(frame, params, gradients)
     return _refine_from(start_estimate(model, frame, T_init, params, grads), model, frame, params, grads,
@@ -354,8 +354,8 @@ def _gauss_newton(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, gra
 def _same_pose(A: np.ndarray, B: np.ndarray, params: TrackParams) -> bool:
     """Whether two poses differ by less than one converged Gauss-Newton step (their verification
     would be the same: it is not measured again)."""
-    return (np.linalg.norm(A[:3, 3] - B[:3, 3]) < params.converged_m
-            and np.arccos(np.clip((np.trace(A[:3, :3] @ B[:3, :3].T) - 1) / 2, -1, 1)) < params.converged_rad)
+    rotation_deg, translation = pose_error(A, B)
+    return translation < params.converged_m and rotation_deg < np.degrees(params.converged_rad)
 
 
 def _rigid(T: np.ndarray) -> np.ndarray:
@@ -416,7 +416,7 @@ def judge(estimate: PoseEstimate, params: TrackParams) -> PoseEstimate:
     e, p = estimate, params
     if not e.measured or not np.isfinite(e.residual_px):
         return e                       # nothing measured: its own reason stands (too little in view)
-    fraction = e.inliers / e.measured if e.measured else 0.0
+    fraction = e.inliers / e.measured
     failed = []
     if not e.inliers >= p.min_inliers:
         failed.append(f"{e.inliers} inliers (needs {p.min_inliers})")
