@@ -74,6 +74,7 @@ from .visibility import segments_in_both_images
 @dataclass(frozen=True)
 class TrackParams:
     samples_per_segment: int = 3
+    coarse_samples_per_segment: int = 1      # on the wide levels (see _gauss_newton)
     candidates: int = 3                      # edges kept per point; each iteration takes the nearest
     search_px: tuple = (40.0, 24.0, 12.0, 6.0, 3.0)     # coarse to fine
     iterations_per_level: int = 5
@@ -313,21 +314,25 @@ def _refine_from(best: PoseEstimate, model: Segments, frame: StereoFrame, params
     return best
 
 
-def _samples_in_view(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, params: TrackParams):
+def _samples_in_view(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, params: TrackParams,
+                     per_segment: int | None = None):
     """Sample points (S, 3) and directions (S, 3), object frame, of the accepted segments in view at
-    ``T``, or None when fewer than 3 segments are."""
+    ``T`` (``per_segment`` each, default ``samples_per_segment``), or None when fewer than 3 segments are."""
     keep = visible(accepted, T, intr, params.aspect_margin_deg)
     if keep.sum() < 3:
         return None
-    points, dirs, _ = model_samples(accepted.select(keep), params.samples_per_segment)
+    points, dirs, _ = model_samples(accepted.select(keep), per_segment or params.samples_per_segment)
     return points, dirs
 
 
 def _gauss_newton(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, grads, search: float, tukey: float,
                   params: TrackParams) -> np.ndarray | None:
     """One level: measure at ``T`` within ``search`` px, then ``iterations_per_level`` Tukey-weighted
-    Gauss-Newton steps over both images; the new pose, or None when too little is in view or found."""
-    samples = _samples_in_view(accepted, T, intr, params)
+    Gauss-Newton steps over both images; the new pose, or None when too little is in view or found.
+    A wide level (searching more than ``fine_start_px``) samples ``coarse_samples_per_segment`` points
+    per segment: it only brings the pose within the fine levels' reach, and its searches are long."""
+    coarse = search > params.fine_start_px
+    samples = _samples_in_view(accepted, T, intr, params, params.coarse_samples_per_segment if coarse else None)
     if samples is None:
         return None
     points_obj, dirs_obj = samples
