@@ -81,11 +81,17 @@ class LineAccumulation:
         return extract_frame(frame, self.params.extract, self.camera_frame, self.times)
 
     def step(self, frame: StereoFrame, T_camera_object: np.ndarray,
-             extraction: FrameSegments | None = None) -> AccumulationStep:
-        """Extract (unless given) and accumulate one frame seen at pose ``T_camera_object``."""
+             extraction: FrameSegments | None = None, T_corrected: np.ndarray | None = None) -> AccumulationStep:
+        """Extract (unless given) and accumulate one frame seen at pose ``T_camera_object`` (recorded).
+        With tracked motion, ``T_corrected`` (4, 4; ``runs.accumulation.tracked_poses``, the passes of
+        ``motion``) is used instead of the refinement against the model so far, which is the
+        one-pass fallback (it fails at 1.5 deg / 4 mm of noise: see ``motion``)."""
         extraction = extraction or self.extract(frame)
         estimate = None
-        if self.params.motion == "tracked":
+        if self.params.motion == "tracked" and T_corrected is not None:
+            self.T_recorded_model.append(invert(T_camera_object) @ T_corrected)
+            T_camera_object = T_corrected
+        elif self.params.motion == "tracked":
             T_camera_object, estimate = self._refined(frame, T_camera_object, extraction)
         context = FrameContext(T_camera_object, frame.intrinsics)
         stats = self.core.update(extraction.segments, invert(T_camera_object), context)

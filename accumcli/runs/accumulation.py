@@ -8,11 +8,14 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from ..evaluate import EdgeSamples, score_segments
 from ..lines2d import StageTimes
 from ..logs import LimitedWarnings
 from ..model_io import read_truth, write_json_lines, write_model, write_ply
 from ..outputs import OutputSet
+from ..motion import MotionParams, corrected, frame_to_frame, fuse, object_segments
 from ..pipeline import AccumulateParams, LineAccumulation
 from ..segments import Segments
 from .base import FrameRange, Progress, RecordingOptions, no_progress, nothing_done
@@ -90,11 +93,16 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
                     continue
                 yield frame
 
+        poses = None
+        if params.motion == "tracked":
+            poses = tracked_poses(lambda: (f for f in rec.frames(frames.start, frames.stop) if f.T_camera_object is not None),
+                                  params, rec.object_frame, rec.camera_frame, resolve_workers(workers, total), acc.times)
         with rerun_log(files, rrd, "accumulate") as viz, scene_log(files, outputs) as scenes, \
                 LimitedWarnings(log) as no_pose:
             for frame, extraction in extracted_frames(frames_with_pose(), params.extract, rec.camera_frame, resolve_workers(workers, total),
                                                       acc.times):
-                step = acc.step(frame, frame.T_camera_object, extraction)
+                step = acc.step(frame, frame.T_camera_object, extraction,
+                                T_corrected=None if poses is None else poses[frame.index])
                 row = {"frame_index": frame.index, "timestamp_ns": frame.timestamp_ns, **step.stats.__dict__}
                 if step.tracking is not None:
                     row.update(tracking=step.tracking.status, residual_px=step.tracking.residual_px)
@@ -142,3 +150,29 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
     result.seconds = time.perf_counter() - t0
     result.outputs = [str(p) for p in (*outputs, history, plot, rrd, png, panel) if p]
     return result
+
+
+def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str, camera_frame: str, workers: int,
+                  times, motion: MotionParams = MotionParams()) -> dict[int, np.ndarray]:
+    """frame index -> the repaired T_camera_object (4, 4) of every frame ``frames_with_pose()`` yields
+    (called once per pass: the recording is streamed again), by the passes of ``motion``: pass 1
+    accumulates with the recorded poses, pass 2 measures the frame-to-frame corrections against
+    pass 1's accepted segments, ``fuse`` combines them with the recorded poses."""
+    gripper = LineAccumulation(AccumulateParams(params.extract, params.line_model, params.rule), object_frame,
+                               camera_frame)
+    for frame, extraction in extracted_frames(frames_with_pose(), params.extract, camera_frame, workers, times):
+        gripper.step(frame, frame.T_camera_object, extraction)
+    skeleton = gripper.model()
+    skeleton = skeleton.select(skeleton.accepted)
+    recorded, corrections, previous = [], {}, None
+    for frame, extraction in extracted_frames(frames_with_pose(), params.extract, camera_frame, workers, times):
+        if previous is not None:
+            t0 = time.perf_counter()
+            c = frame_to_frame(previous, frame, frame.T_camera_object, params.track, extraction.gradients)
+            times.add("tracking", t0)
+            if c is not None:
+                corrections[len(recorded)] = c
+        previous = object_segments(extraction.segments, frame.T_camera_object, skeleton, motion)
+        recorded.append((frame.index, frame.T_camera_object))
+    x = fuse(corrections, len(recorded), motion)
+    return {index: corrected(T, xk) for (index, T), xk in zip(recorded, x)}
