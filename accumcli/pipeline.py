@@ -23,10 +23,14 @@ log = logging.getLogger("accumcli")
 
 @dataclass(frozen=True)
 class AccumulateParams:
-    """``motion``: 'gripper' uses the recorded pose of every frame (the paper); 'tracked' first
-    refines it on the images against the current model (``track.refine_pose``; against all its
-    segments until ``min_tracking_segments`` are accepted), and uses the refined pose where tracking
-    succeeds and moves the recorded one by less than ``max_correction_deg`` / ``max_correction_m``."""
+    """``motion``: 'gripper' uses the recorded pose of every frame (the paper); 'tracked' uses the
+    poses repaired in passes over the recording (``motion``, ``runs.accumulation.tracked_poses``) when
+    the caller gives them to ``LineAccumulation.step``, and otherwise (one frame at a time) refines
+    the recorded pose on the images against the current model (``track.refine_pose``; against all its
+    segments until ``min_tracking_segments`` are accepted), using it where tracking succeeds and it
+    moves the recorded one by less than ``max_correction_deg`` / ``max_correction_m``; that one-pass
+    refinement fails at 1.5 deg / 4 mm of noise (the young model holds background, the later one is
+    smeared)."""
 
     extract: ExtractParams = field(default_factory=ExtractParams)
     line_model: LineModelParams = field(default_factory=LineModelParams)
