@@ -9,13 +9,14 @@ pose smear) refined on frame k+1's images. So:
 1. pass 1 accumulates with the recorded poses: a smeared but background-free skeleton (the static
    background contradicts itself and is removed);
 2. pass 2 keeps, of each frame's extracted segments placed by its recorded pose, those within
-   ``near_m`` / ``near_deg`` of a pass-1 accepted segment (the object's), refines the next frame's
-   recorded pose against them (``track.refine_pose``), and keeps each 'tracked' result as a
-   measurement of the correction between the two frames;
+   ``near_m`` / ``near_deg`` of a pass-1 accepted segment (the object's), refines the recorded pose
+   of each of the next ``span`` frames against them (``track.refine_pose``), and keeps each
+   'tracked' result as a measurement of the correction between the two frames;
 3. the corrections are fused with the recorded poses (``fuse``): a chain of small linear least
    squares, one per axis; the result is used by the ordinary accumulation (a third pass).
 
-The recording is streamed once per pass; only a pose and six numbers per frame are kept.
+The recording is streamed once per pass; kept are the object segments of the last ``span`` frames
+and, per frame, its recorded pose and ``span`` corrections of six numbers.
 """
 
 from __future__ import annotations
@@ -42,13 +43,21 @@ class MotionParams:
     ``sigma_relative_m``: the standard deviation of a verified frame-to-frame correction per axis
     (measured on random scenes: median 0.2-0.5 deg, 0.2-1 mm); ``gate_sigmas``: a correction further
     than this many standard deviations of the recorded poses' difference is not believed (a
-    refinement can verify at a wrong local minimum, 6-22 deg off on the random scenes)."""
+    refinement can verify at a wrong local minimum, 6-22 deg or 12-14 mm off on the random scenes);
+    ``span``: each frame is refined against the object segments of the ``span`` frames before it
+    (a second link bridges a failed one, and a wrong one contradicts the others: on seeds 301-306 a
+    span of 2 halved the median shortfall from the exact poses' model, 3 did not help further);
+    ``residual_sigmas``: after the fusion, the correction furthest from the fused poses (in
+    relative sigmas on any axis) is dropped while it is further than this, and the rest fused again
+    (None: never)."""
 
     near_m: float = 0.01
     near_deg: float = 12.0
     sigma_relative_deg: float = 0.3
     sigma_relative_m: float = 0.001
     gate_sigmas: float = 3.0
+    span: int = 2
+    residual_sigmas: float | None = 2.0
 
 
 def object_segments(segments_camera: Segments, T_recorded: np.ndarray, skeleton: Segments,
@@ -77,18 +86,20 @@ def correction(T_recorded: np.ndarray, T_refined: np.ndarray) -> np.ndarray:
     return np.concatenate([Rotation.from_matrix(C[:3, :3]).as_rotvec(), C[:3, 3]])
 
 
-def fuse(corrections: dict[int, np.ndarray], n: int, params: MotionParams) -> np.ndarray:
+def fuse(corrections: dict[tuple[int, int], np.ndarray], n: int, params: MotionParams) -> np.ndarray:
     """(n, 6) corrections x_k (object frame: rotation vector rad, translation m) of the n recorded
     poses, ``T_k = T_recorded_k exp(x_k)``.
 
-    ``corrections[k]`` (k >= 1) measures ``x_k - x_{k-1}`` (frame k-1's segments refined on frame k:
-    its pose is ``T_recorded_k exp(c_k)`` in frame k-1's gauge; to first order ``c_k = x_k - x_{k-1}``).
+    ``corrections[j, k]`` (j < k, k - j <= ``span``) measures ``x_k - x_j`` (frame j's segments refined
+    on frame k: its pose is ``T_recorded_k exp(c)`` in frame j's gauge; to first order ``c = x_k - x_j``).
     The recorded poses are unbiased with a standard deviation ``s`` per axis, estimated from the
     corrections themselves (their median norm, for a 3D normal difference of two poses 1.538 sqrt(2) s;
-    never below the relative sigma): every axis minimises ``sum x_k^2 / s^2 + sum (x_k - x_{k-1} -
-    c_k)^2 / r^2``, a tridiagonal system. A correction beyond ``gate_sigmas`` of ``sqrt(2 s^2 + r^2)``
-    on any axis is dropped. Frames linked by corrections share one gauge (their mean error, reduced
-    by the square root of their number); unlinked frames keep their recorded pose."""
+    never below the relative sigma ``r``): every axis minimises ``sum x_k^2 / s^2 + sum (x_k - x_j -
+    c_jk)^2 / r^2``, a banded system. A correction beyond ``gate_sigmas`` of ``sqrt(2 s^2 + r^2)``
+    on any axis is dropped, and then, one at a time, the correction furthest from the fused poses
+    while it is more than ``residual_sigmas`` r away on an axis (a wrong correction that other links
+    contradict). Frames linked by corrections share one gauge (their mean error, reduced by the
+    square root of their number); unlinked frames keep their recorded pose."""
     r = np.repeat([np.radians(params.sigma_relative_deg), params.sigma_relative_m], 3)
     x = np.zeros((n, 6))
     if not corrections or n < 2:
@@ -97,21 +108,36 @@ def fuse(corrections: dict[int, np.ndarray], n: int, params: MotionParams) -> np
     s = np.maximum(np.repeat([np.median(np.linalg.norm(c[:, :3], axis=1)),
                               np.median(np.linalg.norm(c[:, 3:], axis=1))], 3) / (1.538 * np.sqrt(2)), r)
     gate = params.gate_sigmas * np.sqrt(2 * s ** 2 + r ** 2)
-    used = {k: v for k, v in corrections.items() if 1 <= k < n and np.all(np.abs(v) <= gate)}
+    used = {jk: v for jk, v in corrections.items() if 0 <= jk[0] < jk[1] < n and np.all(np.abs(v) <= gate)}
     log.info("motion: %d of %d frame-to-frame corrections used; recorded poses' sigma %.2f deg, %.1f mm",
              len(used), len(corrections), np.degrees(s[0]), s[3] * 1000)
+    while True:
+        x = _solve(used, n, s, r)
+        if not used or params.residual_sigmas is None:
+            return x
+        worst, ratio = max(((jk, np.max(np.abs(x[jk[1]] - x[jk[0]] - v) / r)) for jk, v in used.items()),
+                           key=lambda item: item[1])
+        if ratio <= params.residual_sigmas:
+            return x
+        del used[worst]
+
+
+def _solve(used: dict, n: int, s: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """(n, 6) the least-squares corrections of ``fuse`` for the corrections ``used``, per axis."""
+    x = np.zeros((n, 6))
+    band = max([k - j for j, k in used] or [1])
     for axis in range(6):
-        diagonal = np.full(n, 1 / s[axis] ** 2)
-        upper = np.zeros(n)                     # upper[k]: the (k-1, k) entry
+        banded = np.zeros((band + 1, n))          # upper form: banded[band + i - j, j] = H[i, j]
+        banded[band] = 1 / s[axis] ** 2
         rhs = np.zeros(n)
         w = 1 / r[axis] ** 2
-        for k, v in used.items():
-            diagonal[k] += w
-            diagonal[k - 1] += w
-            upper[k] -= w
+        for (j, k), v in used.items():
+            banded[band, k] += w
+            banded[band, j] += w
+            banded[band + j - k, k] -= w
             rhs[k] += w * v[axis]
-            rhs[k - 1] -= w * v[axis]
-        x[:, axis] = solveh_banded(np.stack([upper, diagonal]), rhs)
+            rhs[j] -= w * v[axis]
+        x[:, axis] = solveh_banded(banded, rhs)
     return x
 
 
@@ -122,9 +148,9 @@ def corrected(T_recorded: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 def frame_to_frame(previous: Segments, frame, T_recorded: np.ndarray, track: TrackParams,
                    gradients=None) -> np.ndarray | None:
-    """The correction (``correction``) of frame's recorded pose measured against the previous
-    frame's object segments (object frame, in that frame's recorded gauge), or None unless the
-    refinement is 'tracked'."""
+    """The correction (``correction``) of frame's recorded pose measured against an earlier
+    frame's object segments (``previous``: object frame, in that frame's recorded gauge), or None
+    unless the refinement is 'tracked'."""
     if len(previous) < 3:
         return None
     estimate = refine_pose(previous, frame, T_recorded, track, gradients=gradients)

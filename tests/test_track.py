@@ -409,8 +409,8 @@ def test_fuse_draws_linked_frames_to_one_gauge_and_drops_a_wrong_correction():
     n = 12
     error = np.hstack([np.clip(rng.normal(0, np.radians(1.0), (n, 3)), -np.radians(1.5), np.radians(1.5)),
                        np.clip(rng.normal(0, 0.003, (n, 3)), -0.0045, 0.0045)])   # recorded = true exp(error)
-    corrections = {k: error[k - 1] - error[k] for k in range(1, n)}               # c_k = x_k - x_{k-1}, x = -error
-    corrections[6] = corrections[6] + np.array([np.radians(20.0), 0, 0, 0, 0, 0])
+    corrections = {(k - 1, k): error[k - 1] - error[k] for k in range(1, n)}      # c = x_k - x_{k-1}, x = -error
+    corrections[5, 6] = corrections[5, 6] + np.array([np.radians(20.0), 0, 0, 0, 0, 0])
     residual = fuse(corrections, n, MotionParams()) + error                       # the error left
     for part in (slice(0, 6), slice(6, n)):
         assert (np.ptp(residual[part], axis=0) < 0.5 * np.ptp(error[part], axis=0)).all()

@@ -3,6 +3,7 @@ figures, pictures and Rerun log the user asked for."""
 
 from __future__ import annotations
 
+import collections
 import logging
 import time
 from dataclasses import dataclass, field
@@ -164,15 +165,16 @@ def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str,
         gripper.step(frame, frame.T_camera_object, extraction)
     skeleton = gripper.model()
     skeleton = skeleton.select(skeleton.accepted)
-    recorded, corrections, previous = [], {}, None
+    recorded, corrections, previous = [], {}, collections.deque(maxlen=motion.span)
     for frame, extraction in extracted_frames(frames_with_pose(), params.extract, camera_frame, workers, times):
-        if previous is not None:
+        k = len(recorded)
+        for j, segments in previous:
             t0 = time.perf_counter()
-            c = frame_to_frame(previous, frame, frame.T_camera_object, params.track, extraction.gradients)
+            c = frame_to_frame(segments, frame, frame.T_camera_object, params.track, extraction.gradients)
             times.add("tracking", t0)
             if c is not None:
-                corrections[len(recorded)] = c
-        previous = object_segments(extraction.segments, frame.T_camera_object, skeleton, motion)
+                corrections[j, k] = c
+        previous.append((k, object_segments(extraction.segments, frame.T_camera_object, skeleton, motion)))
         recorded.append((frame.index, frame.T_camera_object))
     x = fuse(corrections, len(recorded), motion)
     return {index: corrected(T, xk) for (index, T), xk in zip(recorded, x)}
