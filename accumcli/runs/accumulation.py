@@ -123,7 +123,7 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
             raise nothing_done(recording, f"no frame in {frames} has a pose of {rec.object_frame!r} in "
                                           f"{rec.camera_frame!r}; nothing was accumulated", result.skipped)
         result.model = acc.model()
-        result.refined_frames = len(acc.T_recorded_model)
+        result.refined_frames = sum(not np.allclose(T, np.eye(4)) for T in acc.T_recorded_model)
         if edges is not None:   # the last row scored this very model
             result.scores = {"segments": result.accepted,
                              **{k: result.rows[-1][k] for k in ("precision", "completeness", "background")}}
@@ -170,7 +170,7 @@ def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str,
         k = len(recorded)
         for j, segments in previous:
             t0 = time.perf_counter()
-            c = frame_to_frame(segments, frame, frame.T_camera_object, params.track, extraction.gradients)
+            c = frame_to_frame(segments, frame, frame.T_camera_object, params.track, extraction.gradients, motion)
             times.add("tracking", t0)
             if c is not None:
                 corrections[j, k] = c
