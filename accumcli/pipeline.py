@@ -23,10 +23,14 @@ log = logging.getLogger("accumcli")
 
 @dataclass(frozen=True)
 class AccumulateParams:
-    """``motion``: 'gripper' uses the recorded pose of every frame (the paper); 'tracked' first
-    refines it on the images against the current model (``track.refine_pose``; against all its
-    segments until ``min_tracking_segments`` are accepted), and uses the refined pose where tracking
-    succeeds and moves the recorded one by less than ``max_correction_deg`` / ``max_correction_m``."""
+    """``motion``: 'gripper' uses the recorded pose of every frame (the paper); 'tracked' uses the
+    poses repaired in passes over the recording (``motion``, ``runs.accumulation.tracked_poses``) when
+    the caller gives them to ``LineAccumulation.step``, and otherwise (one frame at a time) refines
+    the recorded pose on the images against the current model (``track.refine_pose``; against all its
+    segments until ``min_tracking_segments`` are accepted), using it where tracking succeeds and it
+    moves the recorded one by less than ``max_correction_deg`` / ``max_correction_m``; that one-pass
+    refinement fails at 1.5 deg / 4 mm of noise (the young model holds background, the later one is
+    smeared)."""
 
     extract: ExtractParams = field(default_factory=ExtractParams)
     line_model: LineModelParams = field(default_factory=LineModelParams)
@@ -81,11 +85,17 @@ class LineAccumulation:
         return extract_frame(frame, self.params.extract, self.camera_frame, self.times)
 
     def step(self, frame: StereoFrame, T_camera_object: np.ndarray,
-             extraction: FrameSegments | None = None) -> AccumulationStep:
-        """Extract (unless given) and accumulate one frame seen at pose ``T_camera_object``."""
+             extraction: FrameSegments | None = None, T_corrected: np.ndarray | None = None) -> AccumulationStep:
+        """Extract (unless given) and accumulate one frame seen at pose ``T_camera_object`` (recorded).
+        With tracked motion, ``T_corrected`` (4, 4; ``runs.accumulation.tracked_poses``, the passes of
+        ``motion``) is used instead of the refinement against the model so far, which is the
+        one-pass fallback (it fails at 1.5 deg / 4 mm of noise: see ``motion``)."""
         extraction = extraction or self.extract(frame)
         estimate = None
-        if self.params.motion == "tracked":
+        if self.params.motion == "tracked" and T_corrected is not None:
+            self.T_recorded_model.append(invert(T_camera_object) @ T_corrected)
+            T_camera_object = T_corrected
+        elif self.params.motion == "tracked":
             T_camera_object, estimate = self._refined(frame, T_camera_object, extraction)
         context = FrameContext(T_camera_object, frame.intrinsics)
         stats = self.core.update(extraction.segments, invert(T_camera_object), context)

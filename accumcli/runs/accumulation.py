@@ -3,16 +3,20 @@ figures, pictures and Rerun log the user asked for."""
 
 from __future__ import annotations
 
+import collections
 import logging
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+
+import numpy as np
 
 from ..evaluate import EdgeSamples, score_segments
 from ..lines2d import StageTimes
 from ..logs import LimitedWarnings
 from ..model_io import read_truth, write_json_lines, write_model, write_ply
 from ..outputs import OutputSet
+from ..motion import MotionParams, corrected, frame_to_frame, fuse, object_segments
 from ..pipeline import AccumulateParams, LineAccumulation
 from ..segments import Segments
 from .base import FrameRange, Progress, RecordingOptions, no_progress, nothing_done
@@ -90,11 +94,16 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
                     continue
                 yield frame
 
+        poses = None
+        if params.motion == "tracked":
+            poses = tracked_poses(lambda: (f for f in rec.frames(frames.start, frames.stop) if f.T_camera_object is not None),
+                                  params, rec.object_frame, rec.camera_frame, resolve_workers(workers, total), acc.times)
         with rerun_log(files, rrd, "accumulate") as viz, scene_log(files, outputs) as scenes, \
                 LimitedWarnings(log) as no_pose:
             for frame, extraction in extracted_frames(frames_with_pose(), params.extract, rec.camera_frame, resolve_workers(workers, total),
                                                       acc.times):
-                step = acc.step(frame, frame.T_camera_object, extraction)
+                step = acc.step(frame, frame.T_camera_object, extraction,
+                                T_corrected=None if poses is None else poses[frame.index])
                 row = {"frame_index": frame.index, "timestamp_ns": frame.timestamp_ns, **step.stats.__dict__}
                 if step.tracking is not None:
                     row.update(tracking=step.tracking.status, residual_px=step.tracking.residual_px)
@@ -114,7 +123,7 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
             raise nothing_done(recording, f"no frame in {frames} has a pose of {rec.object_frame!r} in "
                                           f"{rec.camera_frame!r}; nothing was accumulated", result.skipped)
         result.model = acc.model()
-        result.refined_frames = len(acc.T_recorded_model)
+        result.refined_frames = sum(not np.allclose(T, np.eye(4)) for T in acc.T_recorded_model)
         if edges is not None:   # the last row scored this very model
             result.scores = {"segments": result.accepted,
                              **{k: result.rows[-1][k] for k in ("precision", "completeness", "background")}}
@@ -142,3 +151,30 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
     result.seconds = time.perf_counter() - t0
     result.outputs = [str(p) for p in (*outputs, history, plot, rrd, png, panel) if p]
     return result
+
+
+def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str, camera_frame: str, workers: int,
+                  times, motion: MotionParams = MotionParams()) -> dict[int, np.ndarray]:
+    """frame index -> the repaired T_camera_object (4, 4) of every frame ``frames_with_pose()`` yields
+    (called once per pass: the recording is streamed again), by the passes of ``motion``: pass 1
+    accumulates with the recorded poses, pass 2 measures the frame-to-frame corrections against
+    pass 1's accepted segments, ``fuse`` combines them with the recorded poses."""
+    gripper = LineAccumulation(AccumulateParams(params.extract, params.line_model, params.rule), object_frame,
+                               camera_frame)
+    for frame, extraction in extracted_frames(frames_with_pose(), params.extract, camera_frame, workers, times):
+        gripper.step(frame, frame.T_camera_object, extraction)
+    skeleton = gripper.model()
+    skeleton = skeleton.select(skeleton.accepted)
+    recorded, corrections, previous = [], {}, collections.deque(maxlen=motion.span)
+    for frame, extraction in extracted_frames(frames_with_pose(), params.extract, camera_frame, workers, times):
+        k = len(recorded)
+        for j, segments in previous:
+            t0 = time.perf_counter()
+            c = frame_to_frame(segments, frame, frame.T_camera_object, params.track, extraction.gradients, motion)
+            times.add("tracking", t0)
+            if c is not None:
+                corrections[j, k] = c
+        previous.append((k, object_segments(extraction.segments, frame.T_camera_object, skeleton, motion)))
+        recorded.append((frame.index, frame.T_camera_object))
+    x = fuse(corrections, len(recorded), motion)
+    return {index: corrected(T, xk) for (index, T), xk in zip(recorded, x)}
