@@ -15,8 +15,8 @@ from ..evaluate import EdgeSamples, score_segments
 from ..lines2d import StageTimes
 from ..logs import LimitedWarnings
 from ..model_io import read_truth, write_json_lines, write_model, write_ply
-from ..outputs import OutputSet
 from ..motion import MotionParams, corrected, frame_to_frame, fuse, object_segments
+from ..outputs import OutputSet
 from ..pipeline import AccumulateParams, LineAccumulation
 from ..segments import Segments
 from .base import FrameRange, Progress, RecordingOptions, no_progress, nothing_done
@@ -78,6 +78,7 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
     t0 = time.perf_counter()
     with options.open(recording) as rec, files:
         total = frames.check(rec)
+        workers = resolve_workers(workers, total)
         acc = LineAccumulation(params, rec.object_frame, rec.camera_frame)
         result = AccumulationResult(acc.model(), times=acc.times)
         step, done = None, 0
@@ -96,11 +97,11 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
 
         poses = None
         if params.motion == "tracked":
-            poses = tracked_poses(lambda: (f for f in rec.frames(frames.start, frames.stop) if f.T_camera_object is not None),
-                                  params, rec.object_frame, rec.camera_frame, resolve_workers(workers, total), acc.times)
+            with_pose = (lambda: (f for f in rec.frames(frames.start, frames.stop) if f.T_camera_object is not None))
+            poses = tracked_poses(with_pose, params, rec.object_frame, rec.camera_frame, workers, acc.times)
         with rerun_log(files, rrd, "accumulate") as viz, scene_log(files, outputs) as scenes, \
                 LimitedWarnings(log) as no_pose:
-            for frame, extraction in extracted_frames(frames_with_pose(), params.extract, rec.camera_frame, resolve_workers(workers, total),
+            for frame, extraction in extracted_frames(frames_with_pose(), params.extract, rec.camera_frame, workers,
                                                       acc.times):
                 step = acc.step(frame, frame.T_camera_object, extraction,
                                 T_corrected=None if poses is None else poses[frame.index])
