@@ -39,8 +39,8 @@ def info_json(summary) -> str:
     return json.dumps(doc, indent=1)
 
 
-def _times(times, frames: int) -> str:
-    return "time per frame: " + ", ".join(f"{k} {1000 * v / max(frames, 1):.1f} ms" for k, v in times.seconds.items())
+def _times(times, frames: int, label: str = "time per frame") -> str:
+    return f"{label}: " + ", ".join(f"{k} {1000 * v / max(frames, 1):.1f} ms" for k, v in times.seconds.items())
 
 
 def extraction_lines(result) -> list[str]:
@@ -54,7 +54,8 @@ def accumulation_lines(result, motion: str = "gripper") -> list[str]:
     skipped = sum(result.skipped.values())
     lines = [f"{result.frames} frames accumulated" + (f", {skipped} skipped without a pose" if skipped else "")
              + f": model of {len(result.model)} segments, {result.accepted} accepted (confidence >= 0.5)",
-             _times(result.times, result.frames)]
+             _times(result.times, result.frames,
+                    "time per frame, its 3 passes together" if motion == "tracked" else "time per frame")]
     if motion == "tracked":
         lines.append(f"tracked motion: {result.refined_frames} of {result.frames} frames used a refined pose")
     if result.scores:
