@@ -51,6 +51,11 @@ suite: $(VENV)/.installed
 	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python benchmarks/suite.py
 	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python benchmarks/track_suite.py
 
+# --motion tracked on noisy gripper poses against the exact-pose model (random scenes, a few minutes).
+.PHONY: motion
+motion: $(VENV)/.installed
+	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python benchmarks/motion_suite.py
+
 # Mutated recordings through info, extraction and accumulation (10,000 inputs by default; bounded:
 # make fuzz FUZZ_ARGS="--count 500" or FUZZ_ARGS="--seconds 120"). Failing inputs go to out/fuzz_crashes/.
 .PHONY: fuzz
