@@ -26,6 +26,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.linalg import solveh_banded
+from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from .geometry import invert, make_transform
@@ -72,12 +73,19 @@ def object_segments(segments_camera: Segments, T_recorded: np.ndarray, skeleton:
     s = segments_camera.transformed(invert(T_recorded), skeleton.frame_id)
     if not len(s) or not len(skeleton):
         return s.select(np.zeros(len(s), bool))
-    rel = s.centers[:, None, :] - skeleton.centers[None]                      # (N, M, 3) metres
-    along = np.einsum("nmk,mk->nm", rel, skeleton.directions)
-    across = np.sqrt(np.maximum(np.sum(rel ** 2, axis=-1) - along ** 2, 0.0))
-    angle = np.degrees(np.arccos(np.clip(np.abs(s.directions @ skeleton.directions.T), 0.0, 1.0)))
-    reach = (skeleton.lengths[None] + s.lengths[:, None]) / 2 + params.near_m
-    keep = ((across < params.near_m) & (angle < params.near_deg) & (np.abs(along) < reach)).any(axis=1)
+    # candidate pairs by centre distance (a pair that passes lies within near_m + reach of each other)
+    radius = 2 * params.near_m + (skeleton.lengths.max() + s.lengths.max()) / 2
+    pairs = cKDTree(s.centers).query_ball_tree(cKDTree(skeleton.centers), radius)
+    n = np.repeat(np.arange(len(s)), [len(p) for p in pairs])
+    m = np.fromiter((j for p in pairs for j in p), np.int64, len(n))
+    rel = s.centers[n] - skeleton.centers[m]                                   # (P, 3) metres
+    along = np.sum(rel * skeleton.directions[m], axis=1)
+    across = np.sqrt(np.maximum(np.sum(rel ** 2, axis=1) - along ** 2, 0.0))
+    angle = np.degrees(np.arccos(np.clip(np.abs(np.sum(s.directions[n] * skeleton.directions[m], axis=1)), 0, 1)))
+    reach = (skeleton.lengths[m] + s.lengths[n]) / 2 + params.near_m
+    near = (across < params.near_m) & (angle < params.near_deg) & (np.abs(along) < reach)
+    keep = np.zeros(len(s), bool)
+    keep[n[near]] = True
     s = s.select(keep)
     s.confidence = np.ones(len(s))
     s.observations = np.ones(len(s), np.int64)

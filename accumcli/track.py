@@ -669,7 +669,7 @@ class PoseTracker:
         s = (time_ns - previous_ns) / max(last_ns - previous_ns, 1)
         return [_rigid(extrapolate(previous, last, s)), last]
 
-    def _implausible(self, estimate: PoseEstimate, time_ns: int) -> str:
+    def _implausible(self, estimate: PoseEstimate, time_ns: int, predicted: np.ndarray | None = None) -> str:
         """Why ``estimate`` cannot be the object's pose given its recent motion ('' if it can): more than
         ``max_jump_deg`` or ``max_jump_m`` from the constant-velocity prediction while the last tracked
         frame is at most ``max_gap_s`` old. A re-acquisition may find a symmetric twin (a box's half
@@ -677,7 +677,8 @@ class PoseTracker:
         p = self.params
         if not self.history or (time_ns - self.history[-1][0]) * 1e-9 > p.max_gap_s:
             return ""
-        rotation, translation = pose_error(estimate.T_camera_object, self.predict(time_ns)[0])
+        predicted = self.predict(time_ns)[0] if predicted is None else predicted   # the frame's, computed once
+        rotation, translation = pose_error(estimate.T_camera_object, predicted)
         if rotation <= p.max_jump_deg and translation <= p.max_jump_m:
             return ""
         return (f"{rotation:.0f} deg and {translation * 1000:.0f} mm from the motion prediction "
@@ -759,8 +760,10 @@ class PoseTracker:
                                 f"(needs {p.min_support_fraction:.0%})")
             if ransac.reason:
                 reacquisition = f"re-acquisition: {ransac.reason}"
+        predicted = self.predict(frame.timestamp_ns)[0] if self.history else None
         for c in candidates:
-            why = self._implausible(c, frame.timestamp_ns) if c.status == "tracked" and T_guess is None else ""
+            why = (self._implausible(c, frame.timestamp_ns, predicted)
+                   if c.status == "tracked" and T_guess is None else "")
             if why:
                 c.status, c.reason = "lost", why
         best = decide(candidates, p)
