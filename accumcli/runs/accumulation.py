@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import collections
 import logging
+import pickle
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -95,14 +97,16 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
                     continue
                 yield frame
 
-        poses = None
+        poses, store = None, None
         if params.motion == "tracked":
             with_pose = (lambda: (f for f in rec.frames(frames.start, frames.stop) if f.T_camera_object is not None))
-            poses = tracked_poses(with_pose, params, rec.object_frame, rec.camera_frame, workers, acc.times)
+            store = ExtractionStore()
+            poses = tracked_poses(with_pose, params, rec.object_frame, rec.camera_frame, workers, acc.times, store)
         with rerun_log(files, rrd, "accumulate") as viz, scene_log(files, outputs) as scenes, \
                 LimitedWarnings(log) as no_pose:
-            for frame, extraction in extracted_frames(frames_with_pose(), params.extract, rec.camera_frame, workers,
-                                                      acc.times):
+            extractions = (store.replay(frames_with_pose()) if store else
+                           extracted_frames(frames_with_pose(), params.extract, rec.camera_frame, workers, acc.times))
+            for frame, extraction in extractions:
                 step = acc.step(frame, frame.T_camera_object, extraction,
                                 T_corrected=None if poses is None else poses[frame.index])
                 row = {"frame_index": frame.index, "timestamp_ns": frame.timestamp_ns, **step.stats.__dict__}
@@ -119,6 +123,8 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
                 if viz:
                     viz.accumulation(step, model, row)
                 result.rows.append(row)
+        if store:
+            store.close()
         result.frames = len(result.rows)
         if result.frames == 0:
             raise nothing_done(recording, f"no frame in {frames} has a pose of {rec.object_frame!r} in "
@@ -154,20 +160,51 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
     return result
 
 
+class ExtractionStore:
+    """Each frame's extraction (without its gradients) kept in a temporary file by the first pass over a
+    recording and read back, in order, by the later ones: the extraction runs once however many passes
+    (``--motion tracked`` makes three), and memory stays flat (the file grows by about 160 kB a frame;
+    it is deleted when closed or collected)."""
+
+    def __init__(self):
+        self.file = tempfile.TemporaryFile()
+
+    def record(self, extractions):
+        """(frame, extraction) pairs passed through, each extraction written (gradients dropped)."""
+        for frame, extraction in extractions:
+            extraction.gradients = None   # megabytes a frame; refinement computes the same ones again
+            pickle.dump(extraction, self.file, protocol=pickle.HIGHEST_PROTOCOL)
+            yield frame, extraction
+
+    def replay(self, frames):
+        """(frame, its recorded extraction) for the same frames, in the same order, as recorded."""
+        self.file.seek(0)
+        for frame in frames:
+            extraction = pickle.load(self.file)
+            if extraction.index != frame.index:
+                raise RuntimeError(f"replayed extraction of frame {extraction.index} for frame {frame.index}")
+            yield frame, extraction
+
+    def close(self) -> None:
+        self.file.close()
+
+
 def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str, camera_frame: str, workers: int,
-                  times, motion: MotionParams = MotionParams()) -> dict[int, np.ndarray]:
+                  times, store: ExtractionStore, motion: MotionParams = MotionParams()) -> dict[int, np.ndarray]:
     """frame index -> the repaired T_camera_object (4, 4) of every frame ``frames_with_pose()`` yields
-    (called once per pass: the recording is streamed again), by the passes of ``motion``: pass 1
-    accumulates with the recorded poses, pass 2 measures the frame-to-frame corrections against
-    pass 1's accepted segments, ``fuse`` combines them with the recorded poses."""
+    (called once per pass: the recording is streamed again; its extractions are recorded in ``store``
+    by pass 1 and replayed after), by the passes of ``motion``: pass 1 accumulates with the recorded
+    poses, pass 2 measures the frame-to-frame corrections against pass 1's accepted segments, ``fuse``
+    combines them with the recorded poses."""
     gripper = LineAccumulation(AccumulateParams(params.extract, params.line_model, params.rule), object_frame,
                                camera_frame)
-    for frame, extraction in extracted_frames(frames_with_pose(), params.extract, camera_frame, workers, times):
+    for frame, extraction in store.record(extracted_frames(frames_with_pose(), params.extract, camera_frame,
+                                                           workers, times)):
         gripper.step(frame, frame.T_camera_object, extraction)
     skeleton = gripper.model()
     skeleton = skeleton.select(skeleton.accepted)
     recorded, corrections, previous = [], {}, collections.deque(maxlen=motion.span)
-    for frame, extraction in extracted_frames(frames_with_pose(), params.extract, camera_frame, workers, times):
+    for frame, extraction in store.replay(frames_with_pose()):
         k = len(recorded)
         for j, segments in previous:
             t0 = time.perf_counter()
