@@ -18,7 +18,7 @@ from accumcli.pipeline import AccumulateParams, LineAccumulation
 from accumcli.recording import Recording
 from accumcli.segments import Segments
 from accumcli.extract import extract_frame
-from accumcli.track import PoseTracker, ransac_pose, refine_pose
+from accumcli.track import PoseTracker, TrackParams, _gradients, _refine_from, ransac_pose, refine_pose, start_estimate
 
 
 @pytest.fixture(scope="module")
@@ -53,6 +53,25 @@ def test_refinement_converges_from_a_perturbed_pose(noisy_pair, model_of_exact):
             rotation, translation = pose_error(estimate.T_camera_object, T_true)
             assert estimate.status == "tracked"
             assert rotation < 0.3 and translation < 0.001, (rotation, translation)
+
+
+def test_a_second_start_that_reaches_a_refined_pose_joins_it_and_a_far_one_does_not(noisy_pair, model_of_exact):
+    exact, _ = noisy_pair
+    truth = read_truth(exact.replace(".mcap", ".truth.json"))
+    params = TrackParams()
+    with Recording(exact) as rec:
+        frame = next(iter(rec.frames(0, 1)))
+    T_true = truth.pose_at(frame.timestamp_ns)
+    grads = _gradients(frame, params, None)
+    start = start_estimate(model_of_exact, frame, perturbed(T_true, 6.0, 0.008), params, grads)
+    # a known pose where this start converges: the refinement stops (None), it would end there
+    assert _refine_from(start, model_of_exact, frame, params, grads, known=(T_true,)) is None
+    # a known pose far from where it converges: refined to the end as without it
+    far = perturbed(T_true, 20.0, 0.03, seed=1)
+    alone = _refine_from(start, model_of_exact, frame, params, grads)
+    beside = _refine_from(start, model_of_exact, frame, params, grads, known=(far,))
+    assert beside is not None and np.array_equal(beside.T_camera_object, alone.T_camera_object)
+    assert pose_error(alone.T_camera_object, T_true)[0] < 0.3
 
 
 def test_tracker_follows_the_sequence_from_the_first_pose_only(noisy_pair, model_of_exact):
