@@ -65,8 +65,8 @@ from typing import Callable
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .geometry import (check_points, check_transform, extrapolate, invert, make_transform, pose_error,
-                       quat_from_transform, rotate_vectors, rotation_about_point, transform_from_quat, transform_points)
+from .geometry import (check_points, check_transform, extrapolate, invert, make_transform, orthonormalized, pose_error,
+                       quat_from_transform, rotate_vectors, rotation_about_point, transform_points)
 from .lines2d import Gradients, LineParams, frame_gradients, parabola_peak, sample
 from .recording import StereoFrame, StereoIntrinsics
 from .segments import Segments
@@ -361,7 +361,7 @@ def _gauss_newton(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, gra
         T = rotation_about_point(step[:3], pivot, step[3:]) @ T
         if np.linalg.norm(step[:3]) < params.converged_rad and np.linalg.norm(step[3:]) < params.converged_m:
             break
-    return _rigid(T)
+    return orthonormalized(T)
 
 
 def _image_gap(accepted: Segments, A: np.ndarray, B: np.ndarray, intr: StereoIntrinsics) -> float:
@@ -380,11 +380,6 @@ def _same_pose(A: np.ndarray, B: np.ndarray, params: TrackParams) -> bool:
     would be the same: it is not measured again)."""
     rotation_deg, translation = pose_error(A, B)
     return translation < params.converged_m and rotation_deg < np.degrees(params.converged_rad)
-
-
-def _rigid(T: np.ndarray) -> np.ndarray:
-    """``T`` with its rotation made exactly orthonormal again (products of many increments drift)."""
-    return transform_from_quat(*quat_from_transform(T))
 
 
 def _verify_at(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, grads, search: float, tukey: float,
@@ -686,7 +681,7 @@ class PoseTracker:
             return [last]
         previous_ns, previous = self.history[-2]
         s = (time_ns - previous_ns) / max(last_ns - previous_ns, 1)
-        return [_rigid(extrapolate(previous, last, s)), last]
+        return [orthonormalized(extrapolate(previous, last, s)), last]
 
     def _implausible(self, estimate: PoseEstimate, time_ns: int, predicted: np.ndarray | None = None) -> str:
         """Why ``estimate`` cannot be the object's pose given its recent motion ('' if it can): more than
