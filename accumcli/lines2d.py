@@ -151,7 +151,7 @@ class Gradients:
     def gxy(self) -> np.ndarray:
         """(H, W, 2) float32: gx and gy as the two channels of one image, so that one bilinear
         lookup (``sample``) reads both (tracking samples them at every iteration)."""
-        return np.ascontiguousarray(np.dstack([self.gx, self.gy]))
+        return cv2.merge([self.gx, self.gy])
 
     @cached_property
     def magnitude(self) -> np.ndarray:
