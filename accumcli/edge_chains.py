@@ -25,7 +25,8 @@ a line's votes to pile up in a +-3 deg window: short and crowded edges are lost.
    matching propagates along it across corners, crossings and polarity flips.
 
 Choices where the task is vague: chains are linked by gradient agreement between neighbours,
-not traced pixel by pixel, so linking and cutting are vectorised (sparse connected components);
+not traced pixel by pixel (the links are found vectorised; their components and cuts in a small
+compiled kernel, ``chain_kernel``);
 runs under 10 px of support are dropped by default, because on the suite their 3D was mostly
 wrong (single-frame near-object precision 0.73 with them, 0.80 without, on the devset's median).
 """
@@ -38,6 +39,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from .chain_kernel import straight_chain_labels
 from .lines2d import (EdgePoints, Gradients, LineParams, Segments2D, StageTimes, _canonical, _weighted_line_fit,
                       detection_start, edge_points, local_segments, refine_on_gradient)
 
@@ -68,31 +70,6 @@ def chain_links(points: EdgePoints, shape: tuple[int, int]) -> np.ndarray:
     return np.concatenate(links)
 
 
-def _components(links: np.ndarray, nodes: np.ndarray, m: int, key: np.ndarray | None = None
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """(len(nodes),) label 0..K-1 of the connected component of every node (indices into M
-    points) over the ``links`` whose two ends are both nodes (of the same ``key``, (len(nodes),),
-    if given), and those links."""
-    local = np.full(m, -1, np.int64)
-    local[nodes] = np.arange(len(nodes))
-    a, b = local[links[:, 0]], local[links[:, 1]]
-    keep = (a >= 0) & (b >= 0)
-    if key is not None:
-        keep[keep] = key[a[keep]] == key[b[keep]]
-    graph = csr_matrix((np.ones(int(keep.sum()), np.int8), (a[keep], b[keep])), shape=(len(nodes), len(nodes)))
-    return connected_components(graph, directed=False)[1].astype(np.int64), links[keep]
-
-
-def _argmax_per_run(values: np.ndarray, starts: np.ndarray) -> np.ndarray:
-    """Offset, within each run of ``values`` beginning at ``starts``, of the run's first maximum."""
-    run = np.repeat(np.arange(len(starts)), np.diff(np.r_[starts, len(values)]))
-    best = np.maximum.reduceat(values, starts)
-    hit = np.flatnonzero(values == best[run])
-    first_hit = np.full(len(starts), len(values))
-    first_hit[run[hit[::-1]]] = hit[::-1]          # the last write wins: the first maximum
-    return first_hit - starts
-
-
 def straight_chains(points: EdgePoints, shape: tuple[int, int], max_residual_px: float = CHAIN_MAX_RESIDUAL_PX,
                     rounds: int = CHAIN_SPLITS, min_length_px: float = 0.0) -> np.ndarray:
     """(M,) label 0..K-1 of the straight chain of every edge point (-1: none).
@@ -104,50 +81,12 @@ def straight_chains(points: EdgePoints, shape: tuple[int, int], max_residual_px:
     8-neighbours in the chain (at a corner, its own pixels bend both arms); a part left in pieces
     becomes several chains. Only the chains cut are looked at again; chains still bent after
     ``rounds`` rounds, or shorter than ``min_length_px`` (too short to give a piece), stay as
-    they are."""
-    m = len(points.mag)
-    labels = np.full(m, -1, np.int64)
-    if m == 0:
-        return labels
-    active = np.arange(m)                      # the points of the chains still to check
-    lab, links = _components(chain_links(points, shape), active, m)
-    n_final = 0
-    for round_ in range(rounds + 1):
-        n = int(lab.max()) + 1
-        xy = points.xy[active]
-        _, center, direction = _weighted_line_fit(lab, n, xy, points.mag[active])
-        t = np.sum((xy - center[lab]) * direction[lab], axis=1)
-        order = np.lexsort((t, lab))               # by chain, then along it
-        starts = np.flatnonzero(np.r_[True, lab[order][1:] != lab[order][:-1]])
-        first, last = order[starts], order[np.r_[starts[1:], len(order)] - 1]
-        chord = xy[last] - xy[first]
-        chord = chord / np.maximum(np.linalg.norm(chord, axis=1), 1e-9)[:, None]
-        rel = xy - xy[first][lab]
-        across = np.abs(rel[:, 0] * chord[lab, 1] - rel[:, 1] * chord[lab, 0])
-        worst_at = starts + _argmax_per_run(across[order], starts)
-        length = np.linalg.norm(xy[last] - xy[first], axis=1)
-        bent = (across[order][worst_at] > max_residual_px) & (round_ < rounds) & (length >= min_length_px)
-        final = ~bent                               # straight chains are final
-        rank = np.cumsum(final) - 1 + n_final
-        done = final[lab]
-        labels[active[done]] = rank[lab[done]]
-        n_final += int(final.sum())
-        if not bent.any():
-            break
-        # cut each bent chain across its line at the farthest point, which lies strictly between
-        # the chain's first and last point along the line (those two lie on the chord)
-        t_cut = np.full(n, np.inf)
-        t_cut[bent] = t[order[worst_at[bent]]]
-        # and drop that point with its 8-neighbours in the chain: a corner's own pixels bend both arms
-        cut_at = np.full((n, 2), -10, np.int64)
-        cut_at[bent] = points.pixel[active[order[worst_at[bent]]]]
-        keep = ~done & (np.max(np.abs(points.pixel[active] - cut_at[lab]), axis=1) > 1)
-        side = lab * 2 + (t > t_cut[lab])
-        active = active[keep]
-        if len(active) == 0:
-            break
-        lab, links = _components(links, active, m, side[keep])
-    return labels
+    they are. Straight chains are numbered in the round they end in, by their lowest point index.
+    Compiled: ``chain_kernel.straight_chain_labels``."""
+    links = chain_links(points, shape)
+    return straight_chain_labels(np.ascontiguousarray(points.xy, np.float64), np.ascontiguousarray(points.mag, np.float64),
+                                 np.ascontiguousarray(points.pixel, np.int64), np.ascontiguousarray(links, np.int64),
+                                 float(max_residual_px), int(rounds), float(min_length_px))
 
 
 def collinear_lines(points: EdgePoints, chains: np.ndarray, reach_px: float, max_deg: float = COLLINEAR_DEG,
