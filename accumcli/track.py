@@ -11,7 +11,7 @@ into both rectified images, lie on image edges:
 - for each point and image, search along the projected segment's normal,
   within ``search_px``, for the ``candidates`` strongest gradient maxima whose
   orientation agrees with the normal (polarity-free), each to sub-pixel
-  precision (``lines2d.parabola_peak``), on the frame's ``lines2d.Gradients``
+  precision (a parabola through its neighbours; compiled: ``edge_search``), on the frame's ``lines2d.Gradients``
   (shared with extraction when the caller passes them);
 - Gauss-Newton on SE(3) (increments in the camera frame, rotating about the
   visible model's centroid) over the signed point-to-line distances in both images, each point taking,
@@ -67,7 +67,8 @@ from scipy.spatial import cKDTree
 
 from .geometry import (check_points, check_transform, extrapolate, invert, make_transform, orthonormalized, pose_error,
                        quat_from_transform, rotate_vectors, rotation_about_point, transform_points)
-from .lines2d import Gradients, LineParams, frame_gradients, parabola_peak, sample
+from .edge_search import edge_candidates
+from .lines2d import Gradients, LineParams, frame_gradients
 from .recording import StereoFrame, StereoIntrinsics
 from .segments import Segments
 from .visibility import segments_in_both_images
@@ -191,30 +192,17 @@ def _measure(points_cam, dirs_cam, intr: StereoIntrinsics, grads: tuple, search:
     """Edge search along the projected normals. Returns per image (left, right) a tuple
     (uv (S, 2), normal (S, 2), candidates (S, C) px along the normal to each edge found, NaN where
     none): the ``params.candidates`` strongest local maxima of the gradient across the segment
-    (polarity-free, orientation within ``min_orientation_cos``), each to sub-pixel precision."""
+    (polarity-free, orientation within ``min_orientation_cos``), each to sub-pixel precision
+    (``edge_search.edge_candidates``)."""
     out = []
-    steps = np.arange(-np.ceil(search), np.ceil(search) + 1)
     projected = intr.project(points_cam)[:2], intr.project(points_cam + 0.002 * dirs_cam)[:2]
     for side, grad in enumerate(grads):
         uv = projected[0][side]
         d = projected[1][side] - uv
         d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
         normal = np.column_stack([-d[:, 1], d[:, 0]])
-        x = uv[:, :1] + steps[None, :] * normal[:, :1]
-        y = uv[:, 1:] + steps[None, :] * normal[:, 1:]
-        g = sample(grad.gxy, x, y)
-        gx, gy = g[..., 0], g[..., 1]
-        along = np.abs(gx * normal[:, :1] + gy * normal[:, 1:])
-        good = (along >= params.min_gradient) & (along >= params.min_orientation_cos * np.hypot(gx, gy))
-        peak = np.zeros_like(good)
-        peak[:, 1:-1] = good[:, 1:-1] & (along[:, 1:-1] >= along[:, :-2]) & (along[:, 1:-1] > along[:, 2:])
-        strength = np.where(peak, along, 0.0)
-        k = min(params.candidates, strength.shape[1] - 1)
-        order = np.argpartition(-strength, k, axis=1)[:, :k]                    # (S, C), the strongest
-        rows = np.arange(len(uv))[:, None]
-        m0, m1, m2 = along[rows, order - 1], along[rows, order], along[rows, np.minimum(order + 1, len(steps) - 1)]
-        sub = parabola_peak(m0, m1, m2)
-        candidates = np.where(strength[rows, order] > 0, steps[order] + np.clip(sub, -0.5, 0.5), np.nan)
+        candidates = edge_candidates(grad.gxy, np.ascontiguousarray(uv), normal, int(np.ceil(search)),
+                                     float(params.min_gradient), float(params.min_orientation_cos), int(params.candidates))
         out.append((uv, normal, candidates))
     return out
 
