@@ -44,7 +44,7 @@ def _parse_workers(text: str) -> int | None:
 frame_workers_option = click.option(
     "--workers", default="auto", show_default=True, metavar="N|auto",
     callback=lambda ctx, param, value: _parse_workers(value),
-    help="Processes extracting frames ahead of this one (auto: 2 on two or more CPUs for 12 frames or more, "
+    help="Processes extracting frames ahead of this one (auto: 2 on two or more CPUs for 40 frames or more, "
          "else 1). The output is the same whatever the number.")
 
 frames_option = click.option("--frames", "frames", default="0:", callback=library_value(_parse_frames),

@@ -38,14 +38,16 @@ def _extract(frame: StereoFrame, params: ExtractParams, camera_frame: str) -> tu
     return extraction, times.seconds
 
 
-AUTO_MIN_FRAMES = 12
+AUTO_MIN_FRAMES = 40
 
 
 def resolve_workers(workers: int | None, frames: int) -> int:
-    """``workers``, or for None (``--workers auto``) what measured fastest on two cores: 2 processes
-    (idle 2-core machine, the 36-frame sample: accumulate 1.30x, extract 1.09x the speed of one), but
-    1 for fewer than ``AUTO_MIN_FRAMES`` frames (the pool's start-up outweighs) or on one CPU. More
-    than 2 was not measured: give ``--workers N`` on a bigger machine."""
+    """``workers``, or for None (``--workers auto``) what measured fastest on two cores: 2 processes,
+    but 1 for fewer than ``AUTO_MIN_FRAMES`` frames or on one CPU. Measured with ``accum accumulate``
+    as a whole command (start-up included; farm-bench, 2-core machine): 2 workers took 1.02x the
+    wall time of one on 24 and 36 frames (the pool's start-up, each worker importing the library and
+    loading the compiled kernels, outweighs) and 0.81x on 60 frames of 640x480. More than 2 was not
+    measured: give ``--workers N`` on a bigger machine."""
     if workers is not None:
         return workers
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
