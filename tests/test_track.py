@@ -434,3 +434,21 @@ def test_fuse_draws_linked_frames_to_one_gauge_and_drops_a_wrong_correction():
     for part in (slice(0, 6), slice(6, n)):
         assert (np.ptp(residual[part], axis=0) < 0.5 * np.ptp(error[part], axis=0)).all()
     assert np.degrees(np.abs(residual[:, :3])).max() < 1.0 and np.abs(residual[:, 3:]).max() < 0.003
+
+
+@pytest.mark.parametrize("dark_left", [True, False])
+def test_edge_search_finds_a_step_edge_either_polarity_to_a_tenth_of_a_pixel(dark_left):
+    from accumcli.edge_search import edge_candidates
+    from accumcli.lines2d import Gradients
+
+    image = np.full((60, 200), 200, np.uint8)
+    image[:, :100] = 40                       # a vertical step between columns 99 and 100
+    if not dark_left:
+        image = 240 - image
+    gxy = Gradients.of(image).gxy
+    uv = np.array([[90.0, 30.0], [100.0, 30.0], [60.0, 30.0]])
+    normal = np.array([[1.0, 0.0], [-1.0, 0.0], [1.0, 0.0]])
+    found = edge_candidates(gxy, uv, normal, 12, 3.0, 0.85, 3)
+    assert abs(found[0, 0] - 9.5) < 0.1 and abs(found[1, 0] - 0.5) < 0.1   # along each normal
+    assert np.isnan(found[:2, 1:]).all()      # one edge: no second candidate
+    assert np.isnan(found[2]).all()           # 39.5 px away: beyond the search
