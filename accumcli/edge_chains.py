@@ -40,6 +40,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from .chain_kernel import straight_chain_labels
+from .grouping import group_range
 from .lines2d import (EdgePoints, Gradients, LineParams, Segments2D, StageTimes, _canonical, _weighted_line_fit,
                       detection_start, edge_points, local_segments, refine_on_gradient)
 
@@ -103,9 +104,7 @@ def collinear_lines(points: EdgePoints, chains: np.ndarray, reach_px: float, max
     n = int(lab.max()) + 1
     _, center, direction = _weighted_line_fit(lab, n, xy, points.mag[on])
     t = np.sum((xy - center[lab]) * direction[lab], axis=1)
-    t_lo, t_hi = np.full(n, np.inf), np.full(n, -np.inf)
-    np.minimum.at(t_lo, lab, t)
-    np.maximum.at(t_hi, lab, t)
+    t_lo, t_hi = group_range(lab, n, t)
     ends = np.concatenate([center + t_lo[:, None] * direction, center + t_hi[:, None] * direction])
     chain_of = np.concatenate([np.arange(n), np.arange(n)])
     pairs = cKDTree(ends).query_pairs(reach_px, output_type="ndarray")

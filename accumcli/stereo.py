@@ -49,7 +49,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .grouping import best_per_key
+from .grouping import best_per_key, group_range
 from .lines2d import Segments2D, sample
 from .recording import StereoIntrinsics
 from .segments import Segments
@@ -306,10 +306,7 @@ def _fit_lines(group, n, s, d, w):
     count = np.bincount(group, (w > 0).astype(float), n)
     residual = d - (a[group] + b[group] * s)
     sigma = np.sqrt(np.bincount(group, w * residual ** 2, n) / safe * count / np.maximum(count - 2, 1))
-    lo = np.full(n, np.inf)
-    hi = np.full(n, -np.inf)
-    np.minimum.at(lo, group[w > 0], s[w > 0])
-    np.maximum.at(hi, group[w > 0], s[w > 0])
+    lo, hi = group_range(group[w > 0], n, s[w > 0])
     return a, b, sigma, count, np.where(hi > lo, hi - lo, 0.0), ms
 
 

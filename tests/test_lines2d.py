@@ -276,3 +276,11 @@ def test_chains_across_a_crossing_are_one_line_with_consistent_positions():
         spacing = (segments.centers[on] - segments.centers[on][0]) @ line_dir[0]
         assert np.allclose(segments.t[on] - segments.t[on][0], spacing, atol=1e-6)
         assert np.abs(spacing - np.sign(line_dir[0] @ d) * (along - along[0])).max() < 0.05 * np.ptp(along)
+
+
+def test_group_range_is_the_min_and_max_per_group():
+    from accumcli.grouping import group_range
+
+    groups = np.array([2, 0, 2, 2, 0])
+    lo, hi = group_range(groups, 4, np.array([5.0, -1.0, 3.0, 9.0, 4.0]))
+    assert lo.tolist() == [-1.0, np.inf, 3.0, np.inf] and hi.tolist() == [4.0, -np.inf, 9.0, -np.inf]
