@@ -160,7 +160,7 @@ class Gradients:
     @cached_property
     def edges(self) -> np.ndarray:
         high = 8.0 * self.gradient_threshold
-        dx, dy = (np.rint(g * 8).astype(np.int16) for g in (self.gx, self.gy))
+        dx, dy = ((g * 8).astype(np.int16) for g in (self.gx, self.gy))   # exact integers (see ``of``): no rint
         return cv2.Canny(dx, dy, high / 2, high, L2gradient=True)
 
     @cached_property
@@ -242,7 +242,9 @@ class EdgePoints:
 def edge_points(grad: Gradients, with_phi: bool = True) -> EdgePoints:
     """Canny pixels moved along their gradient to the magnitude's parabolic maximum (``phi`` None
     unless ``with_phi``: the structure tensor costs time that only the Hough votes need)."""
-    rows, cols = np.nonzero(grad.edges)
+    found = cv2.findNonZero(grad.edges)        # row-major, as np.nonzero, three times faster
+    pixels = found.reshape(-1, 2).astype(np.int64) if found is not None else np.zeros((0, 2), np.int64)
+    rows, cols = pixels[:, 1], pixels[:, 0]
     gx, gy = grad.gx[rows, cols], grad.gy[rows, cols]
     mag = np.hypot(gx, gy)
     keep = mag > 0
