@@ -479,8 +479,9 @@ def refine_on_gradient(segments: Segments2D, magnitude: np.ndarray, profiles: in
     t = np.linspace(-0.4, 0.4, profiles)[None, :] * segments.lengths[:, None]                 # (N, P)
     h = np.arange(-reach, reach + 1, dtype=float)                                              # (H,)
     base = segments.centers[:, None, :] + t[..., None] * segments.directions[:, None, :]       # (N, P, 2)
-    points = base[:, :, None, :] + h[None, None, :, None] * normals[:, None, None, :]          # (N, P, H, 2)
-    m = sample(magnitude, points[..., 0], points[..., 1])                                       # (N, P, H)
+    x = base[:, :, None, 0] + h[None, None, :] * normals[:, None, None, 0]                      # (N, P, H)
+    y = base[:, :, None, 1] + h[None, None, :] * normals[:, None, None, 1]
+    m = sample(magnitude, x, y)                                                                 # (N, P, H)
     best = np.clip(np.argmax(m, axis=2), 1, len(h) - 2)
     take = lambda k: np.take_along_axis(m, (best + k)[..., None], axis=2)[..., 0]  # noqa: E731
     m0, m1, m2 = take(-1), take(0), take(1)
