@@ -13,10 +13,10 @@ lower index (as the stable ``np.lexsort`` orders them).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from .jit import kernel
 
 
-@njit(cache=True)
+@kernel
 def straight_chain_labels(xy, mag, pixel, links, max_residual_px, rounds, min_length_px):  # pragma: no cover
     """(M,) label 0..K-1 of the straight chain of every point (-1: none). ``xy`` (M, 2) float64
     px, ``mag`` (M,) float64 weights, ``pixel`` (M, 2) int64 (row, column), ``links`` (E, 2)

@@ -10,13 +10,16 @@ interpolation (OpenCV's remap rounds the position to 1/32 px), with the border r
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from .jit import kernel
 
 
-@njit(cache=True)
+@kernel
 def _bilinear(gxy, x, y):  # pragma: no cover
     """(gx, gy) of the (H, W, 2) image at (x, y) px, border replicated."""
     h, w = gxy.shape[0], gxy.shape[1]
+    if not (np.isfinite(x) and np.isfinite(y)):
+        return 0.0, 0.0
+    x, y = min(max(x, -1.0), float(w)), min(max(y, -1.0), float(h))   # beyond: the border (no int overflow)
     x0, y0 = np.floor(x), np.floor(y)
     fx, fy = x - x0, y - y0
     i0, j0 = int(x0), int(y0)
@@ -29,7 +32,7 @@ def _bilinear(gxy, x, y):  # pragma: no cover
     return out0, out1
 
 
-@njit(cache=True)
+@kernel
 def edge_candidates(gxy, uv, normal, half_width, min_gradient, min_orientation_cos, n_candidates):  # pragma: no cover
     """(S, C) offsets, px along each point's unit ``normal`` (S, 2) from ``uv`` (S, 2) px, of the
     ``n_candidates`` strongest local maxima of the gradient across the normal within
@@ -51,7 +54,7 @@ def edge_candidates(gxy, uv, normal, half_width, min_gradient, min_orientation_c
             a = abs(gx * nx + gy * ny)
             along[k] = a
             good[k] = a >= min_gradient and a >= min_orientation_cos * np.sqrt(gx * gx + gy * gy)
-        for c in range(n_candidates):      # the strongest peak not taken yet (ties: the nearer side first)
+        for c in range(n_candidates):      # the strongest peak not taken yet (ties: the lower offset first)
             best, best_k = 0.0, -1
             for k in range(1, k_count - 1):
                 if good[k] and along[k] >= along[k - 1] and along[k] > along[k + 1] and along[k] > best:

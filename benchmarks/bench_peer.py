@@ -3,7 +3,7 @@ reading the same recording, one thread, versus ``extract_recording``, ``accumula
 ``track_recording`` (one worker, then two for extraction and accumulation). The machine's speed
 drifts: SGBM and the one-worker runs alternate three times (A B A B) and each ratio is taken against
 the SGBM run just before it; the median is printed with the range. The library's compiled
-kernels are loaded once before (numba's cache, about 0.3 s per process, which a long recording
+kernels are loaded once before (numba's cache, about 0.4 s per process, which a long recording
 amortizes); worker processes load them in the run they belong to.
 
 Targets (issues 9, 10): extract >= 1.5x and accumulate >= 1.3x SGBM's pairs per second; tracking

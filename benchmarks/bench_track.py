@@ -1,7 +1,7 @@
 """Tracking: frames per second at 640x480 on one thread (model from the first 20 frames of a
 simulated 60-frame recording, then all 60 frames tracked from the first pose only; the whole
 library run, reading and decoding included). Measured on the second run in the process; the first
-run, which also loads the compiled kernels (numba's cache, about 0.3 s once per process), is
+run, which also loads the compiled kernels (numba's cache, about 0.4 s once per process), is
 printed beside it.
 
 Target (issue 10): at least 30 stereo frames per second; the frames ``tracked`` more than 3 deg or

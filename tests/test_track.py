@@ -452,3 +452,32 @@ def test_edge_search_finds_a_step_edge_either_polarity_to_a_tenth_of_a_pixel(dar
     assert abs(found[0, 0] - 9.5) < 0.1 and abs(found[1, 0] - 0.5) < 0.1   # along each normal
     assert np.isnan(found[:2, 1:]).all()      # one edge: no second candidate
     assert np.isnan(found[2]).all()           # 39.5 px away: beyond the search
+
+
+def test_edge_search_finds_nothing_far_outside_the_image_or_at_nan():
+    from accumcli.edge_search import edge_candidates
+    from accumcli.lines2d import Gradients
+
+    image = np.full((60, 200), 200, np.uint8)
+    image[:, :100] = 40
+    uv = np.array([[1e30, 30.0], [-9.3e18, 30.0], [np.nan, 30.0], [np.inf, 30.0]])
+    normal = np.tile([1.0, 0.0], (4, 1))
+    assert np.isnan(edge_candidates(Gradients.of(image).gxy, uv, normal, 40, 3.0, 0.85, 3)).all()
+
+
+def test_kernels_compile_without_a_cache_when_there_is_nowhere_to_write_it(monkeypatch):
+    import accumcli.jit as jit
+
+    real = jit.njit
+
+    def njit(*args, **kwargs):
+        if kwargs.get("cache"):
+            raise RuntimeError("cannot cache function 'f': no locator available for file '<x>'")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(jit, "njit", njit)
+
+    def twice(x):
+        return 2 * x
+
+    assert jit.kernel(twice)(21) == 42
