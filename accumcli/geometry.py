@@ -38,11 +38,7 @@ def check_transform(T, name: str = "T_camera_object") -> np.ndarray:
         raise InputError(f"{name}: not rigid: R^T R differs from I by {deviation:.3g}")
     if np.linalg.det(R) < 0:
         raise InputError(f"{name}: not rigid: det R = {np.linalg.det(R):.3g}, a reflection")
-    if deviation > 1e-12:
-        U, _, Vt = np.linalg.svd(R)
-        T = T.copy()
-        T[:3, :3] = U @ Vt
-    return T
+    return orthonormalized(T) if deviation > 1e-12 else T
 
 
 def check_points(P, name: str = "points") -> np.ndarray:

@@ -75,9 +75,8 @@ def object_segments(segments_camera: Segments, T_recorded: np.ndarray, skeleton:
         return s.select(np.zeros(len(s), bool))
     # candidate pairs by centre distance (a pair that passes lies within near_m + reach of each other)
     radius = 2 * params.near_m + (skeleton.lengths.max() + s.lengths.max()) / 2
-    pairs = cKDTree(s.centers).query_ball_tree(cKDTree(skeleton.centers), radius)
-    n = np.repeat(np.arange(len(s)), [len(p) for p in pairs])
-    m = np.fromiter((j for p in pairs for j in p), np.int64, len(n))
+    pairs = cKDTree(s.centers).sparse_distance_matrix(cKDTree(skeleton.centers), radius, output_type="ndarray")
+    n, m = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
     rel = s.centers[n] - skeleton.centers[m]                                   # (P, 3) metres
     along = np.sum(rel * skeleton.directions[m], axis=1)
     across = np.sqrt(np.maximum(np.sum(rel ** 2, axis=1) - along ** 2, 0.0))

@@ -266,28 +266,40 @@ def refine_pose(model: Segments, frame: StereoFrame, T_init: np.ndarray, params:
     already ``min_coverage`` (half the visible model within ``inlier_px`` of an edge in both images)
     runs only the levels searching at most ``fine_start_px``. A 'lost' estimate that found nothing
     better (too little in view, too few edges) keeps ``T_init``. Raises ``InputError`` if ``T_init`` is not a rigid transform."""
+    return _refine(_accepted(model), frame, T_init, params, gradients, search_px, tukey_px)
+
+
+def _accepted(model: Segments) -> Segments:
+    """The model's accepted segments, those tracking uses."""
+    return model.select(model.accepted) if len(model) else model
+
+
+def _refine(accepted: Segments, frame: StereoFrame, T_init: np.ndarray, params: TrackParams,
+            gradients: tuple[Gradients, Gradients] | None, search_px: tuple | None = None,
+            tukey_px: tuple | None = None) -> PoseEstimate:
+    """``refine_pose`` against ``accepted`` (a model's accepted segments, selected once by the caller)."""
     T_init = check_transform(T_init, "T_init (T_camera_object)")
     grads = _gradients(frame, params, gradients)
-    return _refine_from(start_estimate(model, frame, T_init, params, grads), model, frame, params, grads,
+    return _refine_from(start_estimate(accepted, frame, T_init, params, grads), accepted, frame, params, grads,
                         search_px, tukey_px)
 
 
-def start_estimate(model: Segments, frame: StereoFrame, T_init: np.ndarray, params: TrackParams,
+def start_estimate(accepted: Segments, frame: StereoFrame, T_init: np.ndarray, params: TrackParams,
                    grads: tuple[Gradients, Gradients]) -> PoseEstimate:
-    """The verification of the unrefined pose ``T_init`` at the finest search (how good a start it is)."""
-    accepted = model.select(model.accepted) if len(model) else model
+    """The verification of the unrefined pose ``T_init`` at the finest search (how good a start it is)
+    against ``accepted``, a model's accepted segments."""
     return _verify_at(accepted, T_init, frame.intrinsics, grads, params.search_px[-1], params.tukey_px[-1], params)
 
 
-def _refine_from(best: PoseEstimate, model: Segments, frame: StereoFrame, params: TrackParams,
+def _refine_from(best: PoseEstimate, accepted: Segments, frame: StereoFrame, params: TrackParams,
                  grads: tuple[Gradients, Gradients], search_px: tuple | None = None,
                  tukey_px: tuple | None = None, known: tuple = ()) -> PoseEstimate | None:
-    """``refine_pose`` from a start already verified (``start_estimate``). ``known``: poses (4, 4)
+    """``refine_pose`` against ``accepted`` (a model's accepted segments) from a start already verified
+    (``start_estimate``). ``known``: poses (4, 4)
     already refined to the end in this frame; a refinement whose pose, after any level, projects the
     model within ``merge_px`` (mean, both images) of one of them stops and returns None: the finer
     levels would take it to that pose (they search the same edges)."""
     intr = frame.intrinsics
-    accepted = model.select(model.accepted) if len(model) else model
     search_px, tukey_px = search_px or params.search_px, tukey_px or params.tukey_px
     peak = best.coverage
     levels = list(zip(search_px, tukey_px))
@@ -639,6 +651,7 @@ class PoseTracker:
 
     def __post_init__(self):
         check_points(self.model.centers, "model segment centres")
+        self._accepted = _accepted(self.model)     # what tracking uses, selected once
         self._symmetries = None
         self._calibrated = False       # the residual limits adapted from the first given pose (``calibrated``)
 
@@ -649,7 +662,7 @@ class PoseTracker:
         and their inverses.
         A re-acquired pose T also tries T S: the images must tell them apart, or it is 'ambiguous'."""
         if self._symmetries is None:
-            accepted = self.model.select(self.model.accepted)
+            accepted = self._accepted
             found = ransac_pose(self.model, accepted, keep=2 * self.params.ransac_hypotheses + 1) if len(accepted) else None
             identity = PoseEstimate(np.eye(4), 0.0, 0, 0, "")
             found = [T for T, support in (found.hypotheses if found else [])
@@ -716,12 +729,12 @@ class PoseTracker:
         guesses = [T_guess] if T_guess is not None else self.predict(frame.timestamp_ns)
         # the better start first; the other too unless the first verifies and the two are not distinct
         # (within distinct_deg, distinct_m: they would end at the same pose, or be called ambiguous)
-        starts = sorted((start_estimate(self.model, frame, guess, p, grads) for guess in guesses), key=_rank,
+        starts = sorted((start_estimate(self._accepted, frame, guess, p, grads) for guess in guesses), key=_rank,
                         reverse=True)
         candidates = []
         for start in starts:
             if not (candidates and candidates[0].status == "tracked" and not _distinct(start, starts[0], p)):
-                found = _refine_from(start, self.model, frame, p, grads,
+                found = _refine_from(start, self._accepted, frame, p, grads,
                                      known=tuple(c.T_camera_object for c in candidates))
                 if found is not None:
                     candidates.append(found)
@@ -730,7 +743,7 @@ class PoseTracker:
             self._calibrated = True
             candidates = [judge(c, p) for c in candidates]
         if not reacquiring and candidates and not any(c.status == "tracked" for c in candidates) and self.history:
-            wide = refine_pose(self.model, frame, self.history[-1][1], p, grads, p.reacquire_search_px,
+            wide = _refine(self._accepted, frame, self.history[-1][1], p, grads, p.reacquire_search_px,
                                p.reacquire_tukey_px)
             wide.method = "wide"
             candidates.append(wide)
@@ -741,18 +754,18 @@ class PoseTracker:
             observed = observe()
             ransac = ransac_pose(self.model, observed, keep=p.ransac_hypotheses)
             for T, _ in ransac.hypotheses:
-                found = refine_pose(self.model, frame, T, p, grads, p.reacquire_search_px[1:],
+                found = _refine(self._accepted, frame, T, p, grads, p.reacquire_search_px[1:],
                                     p.reacquire_tukey_px[1:])
                 found.method = "ransac"
                 candidates.append(found)
             verified = [c for c in candidates if c.status == "tracked"]
             for c in sorted(verified, key=_rank, reverse=True)[:1]:    # the best one's symmetric twins
                 for S in self.symmetries():
-                    mirrored = refine_pose(self.model, frame, c.T_camera_object @ S, p, grads, p.search_px[2:],
+                    mirrored = _refine(self._accepted, frame, c.T_camera_object @ S, p, grads, p.search_px[2:],
                                            p.tukey_px[2:])
                     mirrored.method = "symmetry"
                     candidates.append(mirrored)
-            accepted = self.model.select(self.model.accepted)
+            accepted = self._accepted
             tree = cKDTree(observed.centers) if len(observed) else None
             for c in candidates:
                 if c.status != "tracked":
