@@ -98,7 +98,11 @@ def extraction_options(func):
         click.option("--gradient-threshold", type=click.FloatRange(0.1, 100.0), default=3.0, show_default=True,
                      help="Edge gradient threshold, grey levels per pixel."),
         click.option("--critical-angle", type=click.FloatRange(0.0, 45.0), default=12.0, show_default=True,
-                     help="Segments closer than this to the epipolar direction (degrees) are rejected."),
+                     help="Segments closer than this to the epipolar direction (degrees) are not matched "
+                          "along the rows."),
+        click.option("--critical-ends/--no-critical-ends", default=True, show_default=True,
+                     help="Triangulate such critical segments from their edge's ends, where disparity is "
+                          "defined (--no-critical-ends: reject them, as the paper does)."),
         click.option("--depth-range", default="0.2:3.0", show_default=True, metavar="MIN:MAX",
                      callback=library_value(lambda text: number_pair(text, ":", "MIN:MAX metres", positive=True)),
                      help="Depths searched by stereo matching, metres."),
@@ -116,7 +120,8 @@ def extraction_options(func):
         kwargs["extract_params"] = ExtractParams(
             LineParams(detector=kwargs.pop("detector"), segment_length_px=kwargs.pop("segment_length"),
                        gradient_threshold=kwargs.pop("gradient_threshold")),
-            StereoParams(min_depth_m=near, max_depth_m=far, critical_angle_deg=kwargs.pop("critical_angle")))
+            StereoParams(min_depth_m=near, max_depth_m=far, critical_angle_deg=kwargs.pop("critical_angle"),
+                         critical_by_ends=kwargs.pop("critical_ends")))
         return func(*args, **kwargs)
 
     return wrapper

@@ -12,7 +12,8 @@ import numpy as np
 
 from .lines2d import DETECTORS, Gradients, LineParams, Segments2D, StageTimes
 from .recording import StereoFrame
-from .segments import Segments
+from .critical import triangulate_critical
+from .segments import Segments, concatenate
 from .stereo import Matches, StereoParams, match, triangulate
 
 
@@ -26,7 +27,8 @@ class ExtractParams:
 class FrameSegments:
     """What one frame gave: 3D segments (camera frame, in ``segments.frame_id``), the
     2D segments of both images, which left/right 2D segments each 3D one came
-    from, counts (2D segments, critical, unmatched, 3D), and the (left, right)
+    from (right -1 for a critical one, triangulated from its run's ends), counts (2D segments,
+    critical, critical triangulated, unmatched, 3D), and the (left, right)
     image gradients it used (``refine_pose`` and ``PoseTracker.update`` take them)."""
 
     index: int
@@ -61,8 +63,14 @@ def extract_frame(frame: StereoFrame, params: ExtractParams = ExtractParams(), c
     m: Matches = match(frame.left, frame.right, left, right, frame.intrinsics, params.stereo)
     t0 = times.add("matching", t0)
     segments, kept = triangulate(left, right, m, frame.intrinsics, params.stereo, camera_frame)
-    times.add("triangulation", t0)
+    t0 = times.add("triangulation", t0)
+    by_ends, critical_left = triangulate_critical(frame.left, frame.right, left, tuple(grads), frame.intrinsics,
+                                                  params.stereo, camera_frame, segments, left.select(m.left[kept]))
+    times.add("critical", t0)
     counts = {"left_2d": len(left), "right_2d": len(right), "critical": m.critical,
-              "unmatched": m.unmatched + (len(m.left) - len(kept)), "segments": len(segments)}
-    return FrameSegments(frame.index, frame.timestamp_ns, segments, left, right, m.left[kept], m.right[kept],
-                         counts, tuple(grads))
+              "critical_3d": len(by_ends), "unmatched": m.unmatched + (len(m.left) - len(kept)),
+              "segments": len(segments) + len(by_ends)}
+    # a critical segment's 3D comes from its run's ends, not from one right segment: right index -1
+    return FrameSegments(frame.index, frame.timestamp_ns, concatenate([segments, by_ends], camera_frame), left,
+                         right, np.concatenate([m.left[kept], critical_left]),
+                         np.concatenate([m.right[kept], np.full(len(critical_left), -1)]), counts, tuple(grads))

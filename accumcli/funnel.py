@@ -4,8 +4,9 @@ correct 3D segments. Stage by stage, as fractions of the edge samples seen in th
 1. ``detected_2d``: a left 2D segment lies on the sample's projection (within ``DETECT_PX``
    across, inside its extent plus ``DETECT_PX``, direction within ``DETECT_DEG``);
 2. ``not_critical``: one such segment is not critical (farther than the critical angle from the
-   epipolar direction, so extraction tries to match it);
-3. ``matched``: one such non-critical segment became a 3D segment;
+   epipolar direction, so ordinary stereo matching tries it);
+3. ``matched``: one such segment became a 3D segment (a critical one through its line's ends,
+   ``critical``; so this stage may exceed the previous one);
 4. ``correct_3d``: the frame's 3D segments cover the sample correctly (as in ``evaluate``).
 
 Which samples a frame shows: the truth's per-pose ``seen`` bits (base64 of numpy.packbits over
@@ -106,7 +107,7 @@ def frame_funnel(segments_camera: Segments, doc: dict, T_camera_object: np.ndarr
         matched = np.zeros(len(left), bool)
         matched[np.asarray(two_d["matched"], int)] = True
         for stage, keep in (("detected_2d", np.ones(len(segment_of), bool)), ("not_critical", usable[segment_of]),
-                            ("matched", usable[segment_of] & matched[segment_of])):
+                            ("matched", matched[segment_of])):
             counts[stage] = int(len(np.unique(sample_of[keep])))
     segments = segments_camera.transformed(invert(T_camera_object), "object")
     _, _, correct_for = classify(segments, edges, tol)

@@ -69,7 +69,7 @@ class Segments:
 def concatenate(parts: list[Segments], frame_id: str) -> Segments:
     """One ``Segments`` of several in the same frame (extra columns kept where all parts have them)."""
     parts = [p for p in parts if len(p)] or [Segments.empty(frame_id)]
-    keys = set.intersection(*(set(p.extra) for p in parts))
+    keys = [k for k in parts[0].extra if all(k in p.extra for p in parts)]   # in order: same bytes out
     return Segments(frame_id, *(np.concatenate([getattr(p, name) for p in parts]) for name in
                                 ("centers", "directions", "lengths", "confidence", "observations")),
                     {k: np.concatenate([p.extra[k] for p in parts]) for k in keys})

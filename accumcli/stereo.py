@@ -5,7 +5,8 @@ Matching, in rectified images (epipolar lines are image rows):
 
 - A left segment is *critical* when it is within ``critical_angle_deg`` of the
   epipolar direction (the row): its disparity along the row is undefined
-  (the paper's critical plane). Critical segments are counted and rejected.
+  (the paper's critical plane). Critical segments are counted and rejected here;
+  ``critical`` triangulates those whose edges end where disparity is defined.
 - Candidates: right segments whose extent covers the left centre's row, with
   the disparity at that row in the range given by ``min_depth_m`` and
   ``max_depth_m``, the same gradient polarity, and directions within
@@ -74,6 +75,20 @@ class StereoParams:
     fit_outlier_px: float = 1.0
     default_disparity_sigma_px: float = 0.25
     single_direction_sigma_deg: float = 6.0  # direction uncertainty of a segment alone on its stretch
+    # critical segments from their runs' ends (``critical``)
+    critical_by_ends: bool = True
+    end_window_px: int = 5               # half width of the block-matching window at a run end
+    end_min_ncc: float = 0.8
+    end_ratio: float = 0.5               # peak cost below this share of the best cost 3 px or more away
+    end_gap_px: float = 3.0              # a longer gap along a line starts another run
+    end_min_run_px: float = 20.0
+    end_across_px: float = 1.5           # a run end this far across a segment's line lies on it
+    end_continuity: float = 0.8          # share of the left image's edge between two ends that must be shown
+    end_verify: float = 0.7              # share of the predicted right edge that the right image must show
+    end_disparity_sigma_px: float = 0.5
+    end_max_direction_sigma_deg: float = 3.0   # segments whose direction is less sure are dropped
+    end_junctions: bool = True           # a run end without a trusted block match takes the disparity ...
+    end_junction_px: float = 4.0         # ... of a triangulated segment ending this near it
 
 
 @dataclass
@@ -88,7 +103,7 @@ class Matches:
     unmatched: int = 0     # non-critical left segments without an accepted match
 
 
-def _angle_from_rows(directions: np.ndarray) -> np.ndarray:
+def angle_from_rows(directions: np.ndarray) -> np.ndarray:
     return np.degrees(np.arcsin(np.clip(np.abs(directions[:, 1]), 0.0, 1.0)))
 
 
@@ -101,8 +116,8 @@ def _row_crossing(seg: Segments2D, index: np.ndarray, v: np.ndarray) -> np.ndarr
 def match(left_img: np.ndarray, right_img: np.ndarray, left: Segments2D, right: Segments2D,
           intr: StereoIntrinsics, params: StereoParams) -> Matches:
     """Stereo correspondences between the local segments of a rectified pair."""
-    critical_l = _angle_from_rows(left.directions) < params.critical_angle_deg
-    usable_r = np.flatnonzero(_angle_from_rows(right.directions) >= params.critical_angle_deg)
+    critical_l = angle_from_rows(left.directions) < params.critical_angle_deg
+    usable_r = np.flatnonzero(angle_from_rows(right.directions) >= params.critical_angle_deg)
     usable_l = np.flatnonzero(~critical_l)
     empty = Matches(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros(0),
                     int(critical_l.sum()), len(usable_l))
@@ -228,7 +243,7 @@ def _patch_score(a: np.ndarray, b: np.ndarray, params: StereoParams) -> np.ndarr
     return ncc - ((mean_a - mean_b) / params.brightness_tolerance) ** 2 - (contrast / params.contrast_tolerance) ** 2
 
 
-def _backproject(u: np.ndarray, v: np.ndarray, d: np.ndarray, intr: StereoIntrinsics) -> np.ndarray:
+def backproject(u: np.ndarray, v: np.ndarray, d: np.ndarray, intr: StereoIntrinsics) -> np.ndarray:
     """(N, 3) points in the left camera frame, metres, from pixel (u, v) and disparity d."""
     z = intr.fx * intr.baseline / d
     return np.column_stack([(u - intr.cx) * z / intr.fx, (v - intr.cy) * z / intr.fy, z])
@@ -263,9 +278,9 @@ def triangulate(left: Segments2D, right: Segments2D, m: Matches, intr: StereoInt
     d_center = np.where(fitted, a[stretch] + b[stretch] * s, m.disparity)
     d_minus = np.where(fitted, d_center - b[stretch] * along, m.disparity)
     d_plus = np.where(fitted, d_center + b[stretch] * along, m.disparity)
-    p_center = _backproject(centers[:, 0], centers[:, 1], d_center, intr)
-    p_minus = _backproject(centers[:, 0] - half[:, 0], centers[:, 1] - half[:, 1], d_minus, intr)
-    p_plus = _backproject(centers[:, 0] + half[:, 0], centers[:, 1] + half[:, 1], d_plus, intr)
+    p_center = backproject(centers[:, 0], centers[:, 1], d_center, intr)
+    p_minus = backproject(centers[:, 0] - half[:, 0], centers[:, 1] - half[:, 1], d_minus, intr)
+    p_plus = backproject(centers[:, 0] + half[:, 0], centers[:, 1] + half[:, 1], d_plus, intr)
     direction = p_plus - p_minus
     alone = ~fitted
     if alone.any():  # direction from the intersection of the two back-projected planes

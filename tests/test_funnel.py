@@ -41,7 +41,11 @@ def test_stages_follow_critical_and_matched_flags():
                                                "critical_angle_deg": 12.0}}
     counts = frame_funnel(Segments.empty("camera_left"), doc, T, edges, None)
     assert counts["seen"] == 50 and counts["detected_2d"] == 50
-    assert counts["not_critical"] == 0 and counts["matched"] == 0 and counts["correct_3d"] == 0
+    # a critical segment that became 3D (from its edge's ends) counts as matched
+    assert counts["not_critical"] == 0 and counts["matched"] == 50 and counts["correct_3d"] == 0
+    doc["segments_2d"]["matched"] = []
+    assert frame_funnel(Segments.empty("camera_left"), doc, T, edges, None)["matched"] == 0
     doc["segments_2d"]["critical_angle_deg"] = 0.0
+    doc["segments_2d"]["matched"] = [0]
     counts = frame_funnel(Segments.empty("camera_left"), doc, T, edges, None)
     assert counts["not_critical"] == 50 and counts["matched"] == 50

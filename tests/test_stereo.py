@@ -24,16 +24,57 @@ def test_fronto_parallel_edge_at_half_a_metre_within_a_millimetre():
         assert np.all(np.abs(seg.directions[on, 1]) > np.cos(np.radians(2)))
 
 
-def test_edge_along_the_epipolar_lines_is_rejected_as_critical():
+def _sides_along_rows(segments, corners):
+    """Masks of the segments on the square's two near-horizontal sides (within 3 mm), and their sides."""
+    sides = [(corners[0], corners[1]), (corners[2], corners[3])]
+    masks = []
+    for a, b in sides:
+        u = (b - a) / np.linalg.norm(b - a)
+        masks.append(np.linalg.norm(np.cross(segments.centers - a, u), axis=1) < 0.003)
+    return masks, sides
+
+
+def test_edge_along_the_epipolar_lines_is_rejected_as_critical_without_its_ends():
+    from dataclasses import replace
+
     # a square rotated by 3 degrees: its top and bottom sides run almost along image rows
     square, corners = rotated_square((0.0, 0.0), 0.05, 3.0, 0.5)
     frame = render_pair([square], seed=2)
-    result = extract_frame(frame, ExtractParams())
-    assert result.counts["critical"] >= 4
+    params = ExtractParams(stereo=replace(ExtractParams().stereo, critical_by_ends=False))
+    result = extract_frame(frame, params)
+    assert result.counts["critical"] >= 4 and result.counts["critical_3d"] == 0
     near_horizontal = np.abs(result.segments.directions[:, 1]) < 0.3
     assert not near_horizontal.any()
     # the vertical sides are still triangulated
     assert (np.abs(result.segments.directions[:, 1]) > 0.95).sum() >= 4
+
+
+def test_edge_along_the_epipolar_lines_is_triangulated_from_its_corners():
+    square, corners = rotated_square((0.0, 0.0), 0.05, 3.0, 0.5)
+    frame = render_pair([square], seed=2)
+    result = extract_frame(frame, ExtractParams())
+    seg = result.segments
+    assert result.counts["critical_3d"] >= 6
+    masks, sides = _sides_along_rows(seg, corners)
+    for on, (a, b) in zip(masks, sides):
+        u = (b - a) / np.linalg.norm(b - a)
+        angle = np.degrees(np.arccos(np.clip(np.abs(seg.directions[on] @ u), 0, 1)))
+        error = np.linalg.norm(np.cross(seg.centers[on] - a, u), axis=1)
+        print(f"side along the rows: {on.sum()} segments, max error {1000 * error.max():.2f} mm, "
+              f"max angle {angle.max():.2f} deg, sigma_depth median {1000 * np.median(seg.extra['sigma_depth_m'][on]):.2f} mm")
+        assert on.sum() >= 3
+        assert error.max() < 0.0015 and angle.max() < 3.0
+    # every near-horizontal 3D segment lies on one of the two sides
+    near_horizontal = np.abs(seg.directions[:, 1]) < 0.3
+    assert np.all(masks[0][near_horizontal] | masks[1][near_horizontal])
+
+
+def test_an_edge_without_ends_in_view_stays_unmatched():
+    # a dark band wider than the view: its long sides run along the rows and never end in the image
+    band = quad([[-3.0, -0.02, 0.5], [3.0, -0.02, 0.5], [3.0, 0.03, 0.5], [-3.0, 0.03, 0.5]])
+    result = extract_frame(render_pair([band], seed=3), ExtractParams())
+    assert result.counts["critical"] >= 10
+    assert result.counts["critical_3d"] == 0
 
 
 def test_slanted_edge_direction_from_global_support():

@@ -23,7 +23,7 @@ class ExtractionResult:
     per-stage times (seconds, summed), the wall time and the files written."""
 
     frames: int = 0
-    totals: dict = field(default_factory=lambda: {"segments": 0, "left_2d": 0, "critical": 0, "unmatched": 0})
+    totals: dict = field(default_factory=lambda: {"segments": 0, "left_2d": 0, "critical": 0, "critical_3d": 0, "unmatched": 0})
     times: StageTimes = field(default_factory=StageTimes)
     seconds: float = 0.0
     outputs: list = field(default_factory=list)

@@ -1,0 +1,219 @@
+"""Near-horizontal edges triangulated from their ends (issue 9, deliverable 4).
+
+Along an image row the disparity of a near-horizontal edge is undefined: the paper rejects
+such *critical* segments (within ``critical_angle_deg`` of the epipolar direction). Where the
+edge ends at a corner or junction, the disparity *is* defined there: the grey-level window
+around the end holds structure across the row. So, per left line (``Segments2D.line_id``):
+
+1. Its critical local segments form *runs* (sorted along the line, split at gaps over
+   ``end_gap_px``); a run shorter than ``end_min_run_px`` is left alone (its direction would
+   rest on two nearby, uncertain depths).
+2. Each run end is block-matched along its row in the right image: the normalized
+   cross-correlation of a (2 w + 1)^2 window (w = ``end_window_px``) at every integer disparity
+   in the depth range, sub-pixel by a parabola through the peak. An end is trusted only when
+   the peak's NCC reaches ``end_min_ncc`` and its cost (1 - NCC) is below ``end_ratio`` times
+   that of the best disparity at least 3 px away: a window with only horizontal structure
+   (an edge that fades out rather than ends) correlates about as well at every shift along the
+   row and is refused. Block matching is OpenCV's domain too (StereoBM), but only at two points
+   per line, with a peak test of our own: written here, vectorised over all ends at once.
+3. Both ends trusted: disparity is affine in the image position along a 3D line's projection,
+   so each local segment of the run takes its depth from the line through the two ends' disparities.
+   The right image must show the edge where that predicts (``end_verify`` of the samples along
+   the predicted right line, with the left edge's polarity and at least the Canny threshold).
+
+Uncertainty: each end's disparity carries ``end_disparity_sigma_px`` (measured against truth on
+the suite); a segment's depth sigma is its interpolation's, and its direction sigma the tilt that
+the two ends' errors give over the run.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+from scipy.spatial import cKDTree
+
+from .grouping import group_range
+from .lines2d import Gradients, Segments2D, parabola_peak, sample
+from .recording import StereoIntrinsics
+from .segments import Segments
+from .stereo import StereoParams, angle_from_rows, backproject
+
+
+def _runs(left: Segments2D, index: np.ndarray, gap_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """Segments ``index`` sorted along their lines, and (len(index),) run numbers 0..R-1."""
+    order = index[np.lexsort((left.t[index], left.line_id[index]))]
+    start = left.t[order] - left.lengths[order] / 2
+    end = left.t[order] + left.lengths[order] / 2
+    new = np.ones(len(order), bool)
+    new[1:] = (left.line_id[order[1:]] != left.line_id[order[:-1]]) | (start[1:] > end[:-1] + gap_px)
+    return order, np.cumsum(new) - 1
+
+
+def _block_match(left_img: np.ndarray, right_img: np.ndarray, ends: np.ndarray, d_lo: int, d_hi: int,
+                 w: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per end (M, 2) (u, v) px in the left image: the disparity (M,) px of the best NCC of its
+    window along its row in the right image, that NCC (M,), and the best NCC at least 3 px away.
+
+    Windows sit on whole pixels (the end rounded): the sums are then exact integers, so the
+    result does not depend on the summation order, which numpy's SIMD loops choose by memory
+    alignment (the same bytes out in every process)."""
+    height, width = left_img.shape
+    column = np.rint(ends[:, 0]).astype(np.int64)
+    offsets = np.arange(-w, w + 1)
+    h = 2 * w + 1
+    rows = np.clip(np.rint(ends[:, 1]).astype(np.int64)[:, None, None] + offsets[None, :, None], 0, height - 1)
+    window = left_img[rows, np.clip(column[:, None, None] + offsets, 0, width - 1)].astype(np.float32)   # (M, h, h)
+    strip_columns = np.clip(column[:, None, None] - d_hi - w + np.arange(d_hi - d_lo + 2 * w + 1), 0, width - 1)
+    strip = right_img[rows, strip_columns].astype(np.float32)                                # (M, h, D + 2w)
+    # integer grey levels: the window products and their sums are integers under 2^24, exact in float32
+    cross = np.einsum("myx,mydx->md", window, sliding_window_view(strip, h, axis=2))
+    column_sums = np.concatenate([np.zeros((len(ends), 2, 1)), np.cumsum(np.stack(
+        [strip.sum(axis=1, dtype=np.float64), (strip * strip).sum(axis=1, dtype=np.float64)], 1), axis=2)], 2)
+    sum_b, square_b = (column_sums[:, i, h:] - column_sums[:, i, :-h] for i in (0, 1))         # (M, D) each
+    sum_a = window.sum(axis=(1, 2), dtype=np.float64)
+    n = h * h
+    cross = cross.astype(np.float64) * n - sum_a[:, None] * sum_b
+    energy_b = square_b.astype(np.float64) * n - sum_b.astype(np.float64) ** 2
+    energy_a = (window * window).sum(axis=(1, 2), dtype=np.float64) * n - sum_a ** 2
+    denominator = np.sqrt(np.maximum(energy_b, 0.0) * energy_a[:, None])
+    ncc = np.where(denominator > 0, cross / np.maximum(denominator, 1.0), 0.0)                  # (M, D)
+    k = np.argmax(ncc, axis=1)
+    rows_m = np.arange(len(ends))
+    best = ncc[rows_m, k]
+    inner = np.clip(k, 1, ncc.shape[1] - 2)
+    shift = np.clip(parabola_peak(ncc[rows_m, inner - 1], ncc[rows_m, inner], ncc[rows_m, inner + 1]), -0.5, 0.5)
+    shift = np.where(inner == k, shift, 0.0)
+    far = np.abs(np.arange(ncc.shape[1])[None, :] - k[:, None]) >= 3
+    second = np.max(np.where(far, ncc, -1.0), axis=1)
+    # window k is centred on right column (left column - d_hi + k): disparity d_hi - k, which the
+    # end, half a pixel away at most, shares
+    return d_hi - (k + shift), best, second
+
+
+def _shown(grad: Gradients, points: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """(K,) share of the points (K, S, 2) px where the gradient across the line (``normal`` (K, 2),
+    either sign: a silhouette's polarity changes with the background behind it) reaches the Canny
+    threshold: how much of a predicted edge the image shows."""
+    gx, gy = (sample(g, points[..., 0], points[..., 1]) for g in (grad.gx, grad.gy))
+    across = gx * normal[:, None, 0] + gy * normal[:, None, 1]
+    return np.mean(np.abs(across) >= grad.gradient_threshold, axis=1)
+
+
+def _junction_disparity(ends: np.ndarray, matched: Segments, matched_2d: Segments2D, intr: StereoIntrinsics,
+                        radius_px: float) -> np.ndarray:
+    """(M,) disparity px at each end (M, 2) px where a triangulated (non-critical) segment meets
+    it, NaN elsewhere. ``matched``: those 3D segments (left camera frame), ``matched_2d`` their
+    left 2D segments; one meets an end when one of its 2D endpoints lies within ``radius_px`` of
+    it. The disparity is the 3D segment's line's at the end's row: a line across the rows fixes
+    the depth there well (its own fit used all its pieces), unlike the block match of a window that
+    the background behind a corner shares."""
+    out = np.full(len(ends), np.nan)
+    if len(matched) == 0:
+        return out
+    corner_2d = matched_2d.endpoints().reshape(-1, 2)
+    hits = cKDTree(corner_2d).query_ball_point(ends, radius_px, return_length=True)
+    if not hits.any():
+        return out
+    distance, nearest = cKDTree(corner_2d).query(ends[hits > 0])
+    k = nearest // 2
+    c, d = matched.centers[k], matched.directions[k]
+    slope = (ends[hits > 0, 1] - intr.cy) / intr.fy            # the end's row as y / z
+    denominator = d[:, 1] - slope * d[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lam = (slope * c[:, 2] - c[:, 1]) / denominator
+        z = c[:, 2] + lam * d[:, 2]
+        disparity = intr.fx * intr.baseline / z
+    # the point must lie near the 3D segment (within its half length and the radius beyond)
+    near = np.abs(lam) <= matched.lengths[k] / 2 * (1 + 2 * radius_px / np.maximum(matched_2d.lengths[k], 1.0))
+    out[np.flatnonzero(hits > 0)] = np.where(near & (z > 0) & (np.abs(denominator) > 1e-6), disparity, np.nan)
+    return out
+
+
+def triangulate_critical(left_img: np.ndarray, right_img: np.ndarray, left: Segments2D,
+                         grads: tuple[Gradients, Gradients], intr: StereoIntrinsics, params: StereoParams,
+                         frame_id: str, matched: Segments | None = None,
+                         matched_2d: Segments2D | None = None) -> tuple[Segments, np.ndarray]:
+    """3D segments (left camera frame) of the critical left segments between two run ends whose
+    disparity is known (module docstring), and the (K,) left segment indices they come from.
+    ``matched``, ``matched_2d``: the frame's triangulated segments and their left 2D segments,
+    whose ends give junction disparities."""
+    critical = np.flatnonzero(angle_from_rows(left.directions) < params.critical_angle_deg)
+    none = Segments.empty(frame_id), np.zeros(0, np.int64)
+    if len(critical) == 0 or not params.critical_by_ends:
+        return none
+    order, run = _runs(left, critical, params.end_gap_px)
+    n_runs = int(run.max()) + 1
+    lo, _ = group_range(run, n_runs, left.t[order] - left.lengths[order] / 2)
+    _, hi = group_range(run, n_runs, left.t[order] + left.lengths[order] / 2)
+    ref = order[np.flatnonzero(np.r_[True, run[1:] != run[:-1]])]   # one segment per run places its line
+    base = left.centers[ref] - left.t[ref, None] * left.line_direction[ref]   # each run's line at t = 0
+    ends = np.concatenate([base + lo[:, None] * left.line_direction[ref],
+                           base + hi[:, None] * left.line_direction[ref]])     # (2R, 2) px
+    end_ref = np.concatenate([ref, ref])
+    d_lo = max(1, int(np.floor(intr.fx * intr.baseline / params.max_depth_m)))
+    d_hi = int(np.ceil(intr.fx * intr.baseline / params.min_depth_m))
+    disparity, best, second = _block_match(left_img, right_img, ends, d_lo, d_hi, params.end_window_px)
+    by_block = (best >= params.end_min_ncc) & ((1 - best) < params.end_ratio * (1 - second))
+    if matched is not None and params.end_junctions:
+        junction = _junction_disparity(ends, matched, matched_2d, intr, params.end_junction_px)
+        at_junction = np.isfinite(junction) & ~by_block
+        disparity = np.where(at_junction, junction, disparity)
+        by_block |= at_junction
+    trusted = np.flatnonzero(by_block & (disparity > d_lo) & (disparity < d_hi))
+    if len(trusted) < 2:
+        return none
+    ends, disparity, end_ref = ends[trusted], disparity[trusted], end_ref[trusted]
+    # each critical segment's nearest trusted end on either side on its line (parallel; either polarity)
+    direction = left.line_direction[critical]
+    rel = ends[None, :, :] - left.centers[critical, None, :]                       # (K, E, 2)
+    along = np.einsum("kec,kc->ke", rel, direction)
+    across = np.abs(rel[..., 0] * direction[:, None, 1] - rel[..., 1] * direction[:, None, 0])
+    parallel = np.abs(np.einsum("kc,ec->ke", direction, left.line_direction[end_ref])) >= np.cos(np.radians(3.0))
+    on_line = (across <= params.end_across_px) & parallel
+    half = left.lengths[critical, None] / 2
+    before = np.where(on_line & (along <= -half + params.end_gap_px), along, -np.inf)
+    after = np.where(on_line & (along >= half - params.end_gap_px), along, np.inf)
+    e0, e1 = np.argmax(before, axis=1), np.argmin(after, axis=1)
+    rows = np.arange(len(critical))
+    t0, t1 = before[rows, e0], after[rows, e1]
+    span = t1 - t0
+    ok = np.isfinite(span) & (span >= params.end_min_run_px)
+    seg, e0, e1, t0, t1, span = (x[ok] for x in (critical, e0, e1, t0, t1, span))
+    if len(seg) == 0:
+        return none
+    # the left image shows the edge all the way between the two ends, the right one where predicted
+    s = np.linspace(0.0, 1.0, 24)[None, :, None]
+    path = ends[e0][:, None, :] + s * (ends[e1] - ends[e0])[:, None, :]           # (K, S, 2)
+    normal = np.column_stack([-left.line_direction[seg, 1], left.line_direction[seg, 0]])
+    d_path = disparity[e0][:, None] + s[..., 0] * (disparity[e1] - disparity[e0])[:, None]
+    right_path = np.stack([path[..., 0] - d_path, path[..., 1]], axis=-1)
+    ok = (_shown(grads[0], path, normal) >= params.end_continuity) & (_shown(grads[1], right_path, normal) >= params.end_verify)
+    seg, e0, e1, t0, t1, span = (x[ok] for x in (seg, e0, e1, t0, t1, span))
+    if len(seg) == 0:
+        return none
+    d0, d1 = disparity[e0], disparity[e1]
+    direction = left.line_direction[seg]
+    center = left.centers[seg]
+    half_t = left.lengths[seg] / 2
+    a_c = -t0 / span                                      # where the centre (along 0) lies between the ends
+
+    def disparity_at(offset):
+        return d0 + (offset - t0) / span * (d1 - d0)
+
+    half = half_t[:, None] * direction
+    p_c = backproject(center[:, 0], center[:, 1], disparity_at(0.0), intr)
+    p_m = backproject(center[:, 0] - half[:, 0], center[:, 1] - half[:, 1], disparity_at(-half_t), intr)
+    p_p = backproject(center[:, 0] + half[:, 0], center[:, 1] + half[:, 1], disparity_at(half_t), intr)
+    length = np.linalg.norm(p_p - p_m, axis=1)
+    direction_3d = (p_p - p_m) / np.maximum(length, 1e-12)[:, None]
+    sigma_end = params.end_disparity_sigma_px
+    depth_per_disparity = p_c[:, 2] ** 2 / (intr.fx * intr.baseline)
+    sigma_d = sigma_end * np.sqrt((1 - a_c) ** 2 + a_c ** 2)
+    slope_sigma = sigma_end * np.sqrt(2.0) / span           # px of disparity per px along the line
+    sigma_direction = np.arctan2(depth_per_disparity * slope_sigma * 2 * half_t, np.maximum(length, 1e-9))
+    score = np.full(len(seg), params.end_min_ncc)
+    segments = Segments(frame_id, p_c, direction_3d, length, score, np.ones(len(seg), np.int64),
+                        {"sigma_depth_m": depth_per_disparity * sigma_d, "sigma_direction_rad": sigma_direction,
+                         "disparity_px": disparity_at(0.0), "u": center[:, 0], "v": center[:, 1]})
+    sure = sigma_direction <= np.radians(params.end_max_direction_sigma_deg)
+    return segments.select(sure), seg[sure]
