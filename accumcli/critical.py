@@ -210,6 +210,11 @@ def triangulate_critical(left_img: np.ndarray, right_img: np.ndarray, left: Segm
                            base + hi[:, None] * left.line_direction[ref]])     # (2R, 2) px
     end_ref = np.concatenate([ref, ref])
     outward = np.concatenate([-left.line_direction[ref], left.line_direction[ref]])
+    if params.end_skip_crossed:   # before the block matching, which need not look at these ends then
+        real = ~_crossed(ends, outward, grads[0], params) & ~_interrupted(ends, outward, params)
+        ends, end_ref = ends[real], end_ref[real]
+    if len(ends) < 2:
+        return none
     d_lo = max(1, int(np.floor(intr.fx * intr.baseline / params.max_depth_m)))
     d_hi = int(np.ceil(intr.fx * intr.baseline / params.min_depth_m))
     disparity, best, second = _block_match(left_img, right_img, ends, d_lo, d_hi, params.end_window_px)
@@ -219,10 +224,7 @@ def triangulate_critical(left_img: np.ndarray, right_img: np.ndarray, left: Segm
         at_junction = np.isfinite(junction) & ~by_block
         disparity = np.where(at_junction, junction, disparity)
         by_block |= at_junction
-    trusted = by_block & (disparity > d_lo) & (disparity < d_hi)
-    if params.end_skip_crossed:
-        trusted &= ~_crossed(ends, outward, grads[0], params) & ~_interrupted(ends, outward, params)
-    trusted = np.flatnonzero(trusted)
+    trusted = np.flatnonzero(by_block & (disparity > d_lo) & (disparity < d_hi))
     if len(trusted) < 2:
         return none
     ends, disparity, end_ref = ends[trusted], disparity[trusted], end_ref[trusted]
