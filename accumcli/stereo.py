@@ -86,9 +86,8 @@ class StereoParams:
     end_continuity: float = 0.8          # share of the left image's edge between two ends that must be shown
     end_verify: float = 0.7              # share of the predicted right edge that the right image must show
     end_disparity_sigma_px: float = 0.5
-    end_skip_crossed: bool = True        # an end that another edge runs through (a T-junction) is not used
-    end_crossing_px: float = 5.0         # ... crossing the end's line this far on both sides
-    end_continuation_px: float = 40.0    # an end facing another on its line this near is an interruption
+    end_skip_interrupted: bool = True    # an end facing another on its line within ... is not used:
+    end_continuation_px: float = 40.0    # ... this far, an interruption (occluder, mark), not an end
     end_max_direction_sigma_deg: float = 3.0   # segments whose direction is less sure are dropped
     end_junctions: bool = True           # a run end without a trusted block match takes the disparity ...
     end_junction_px: float = 4.0         # ... of a triangulated segment ending this near it

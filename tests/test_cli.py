@@ -89,6 +89,21 @@ def test_extract_writes_one_line_per_frame(small_recording, tmp_path):
     assert json.loads(figures.output)["accuracy_near_object"] > 0.8
 
 
+def test_critical_ends_can_be_switched_off_for_the_papers_rule(tmp_path):
+    import json
+    from pathlib import Path
+
+    board = Path(__file__).resolve().parent.parent / "sample_data" / "chessboard" / "chessboard.mcap"
+    counts = {}
+    for flag in ("--critical-ends", "--no-critical-ends"):
+        out = tmp_path / f"frames{flag}.jsonl"
+        assert run("extract", str(board), "-o", out, "--frames", "0:2", flag).exit_code == 0
+        lines = [json.loads(line)["counts"] for line in out.read_text().splitlines()]
+        counts[flag] = (sum(c["critical_3d"] for c in lines), sum(c["critical"] for c in lines))
+    assert counts["--critical-ends"][0] > 0 and counts["--no-critical-ends"][0] == 0
+    assert counts["--critical-ends"][1] == counts["--no-critical-ends"][1] > 0
+
+
 def test_accumulate_then_eval(small_recording, tmp_path):
     import json
 
