@@ -89,6 +89,7 @@ class StereoParams:
     end_skip_interrupted: bool = True    # an end facing another on its line within ... is not used:
     end_continuation_px: float = 40.0    # ... this far, an interruption (occluder, mark), not an end
     end_max_direction_sigma_deg: float = 3.0   # segments whose direction is less sure are dropped
+    end_inner_window: bool = True        # an end whose window fails tries the window beside it, inside
     end_junctions: bool = True           # a run end without a trusted block match takes the disparity ...
     end_junction_px: float = 4.0         # ... of a triangulated segment ending this near it
     end_max_depth_ratio: float = 1.5     # ends farther apart in depth: an occluded edge, not a receding one

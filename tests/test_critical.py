@@ -1,0 +1,49 @@
+"""Block matching at the ends of critical edges (accumcli.critical) on hand-made image pairs."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from accumcli.critical import _block_match, _peak_trusted
+from accumcli.stereo import StereoParams
+
+
+def _box_pair(textured: bool = True, seed: int = 0):
+    """Left and right (240, 320) images of a box's front face (grey 150) (rows 100-159, columns 120-219
+    in the left image) at disparity 40, its dark left side face (60) 12 px wide in the left image and
+    2 px in the right one (the cameras see it at different angles), over a background at
+    disparity 10 (textured, or a uniform grey)."""
+    rng = np.random.default_rng(seed)
+    texture = cv2.GaussianBlur(rng.uniform(40, 160, (240, 700)).astype(np.float32), (0, 0), 1.5)
+    if not textured:
+        texture[:] = 100.0
+    left, right = texture[:, 300:620].copy(), texture[:, 310:630].copy()
+    left[100:160, 108:120] = 60.0
+    right[100:160, 78:80] = 60.0
+    left[100:160, 120:220] = 150.0
+    right[100:160, 80:180] = 150.0
+    return left.astype(np.uint8), right.astype(np.uint8)
+
+
+def test_a_window_beside_a_silhouette_corner_matches_better_than_the_centred_one():
+    left, right = _box_pair()
+    params = StereoParams()
+    corner = np.array([[119.5, 99.5]])                 # the top edge's left end, where the side face begins
+    d, best, second = _block_match(left, right, corner, 5, 120, params.end_window_px)
+    print(f"centred window: d {d[0]:.2f}, NCC {best[0]:.3f}, best 3 px away {second[0]:.3f}")
+    beside = corner + np.array([[1.0, 0.0]]) * params.end_window_px   # on the top edge's side
+    d_in, best_in, second_in = _block_match(left, right, beside, 5, 120, params.end_window_px)
+    print(f"window beside it: d {d_in[0]:.2f}, NCC {best_in[0]:.3f}, best 3 px away {second_in[0]:.3f}")
+    # the centred window holds the side face, which the right camera sees 2 px wide instead of 12
+    assert best[0] < 0.9 < best_in[0]
+    assert _peak_trusted(best_in, second_in, params)[0] and abs(d_in[0] - 40) < 0.2
+
+
+def test_a_window_on_an_edge_that_only_runs_along_the_row_is_not_trusted():
+    left, right = _box_pair(textured=False)
+    params = StereoParams()
+    middle = np.array([[170.0, 99.5]])                 # halfway along the top edge, nothing else in view
+    d, best, second = _block_match(left, right, middle, 5, 120, params.end_window_px)
+    print(f"along the top edge: NCC {best[0]:.3f}, 3 px away {second[0]:.3f}")
+    assert best[0] > 0.95 and not _peak_trusted(best, second, params)[0]
