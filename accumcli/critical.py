@@ -199,8 +199,11 @@ def triangulate_critical(left_img: np.ndarray, right_img: np.ndarray, left: Segm
         ends, end_ref, outward = ends[real], end_ref[real], outward[real]
     if len(ends) < 2:
         return none
+    # the searched disparities: the depth range's, within the image width
     d_lo = max(1, int(np.floor(intr.fx * intr.baseline / params.max_depth_m)))
-    d_hi = int(np.ceil(intr.fx * intr.baseline / params.min_depth_m))
+    d_hi = int(min(np.ceil(intr.fx * intr.baseline / params.min_depth_m), left_img.shape[1] - 1))
+    if d_hi - d_lo < 8:    # too few shifts for the peak test (3 px and more away)
+        return none
     disparity, best, second = _block_match(left_img, right_img, ends, d_lo, d_hi, params.end_window_px)
     by_block = _peak_trusted(best, second, params)
     if params.end_inner_window and (~by_block).any():

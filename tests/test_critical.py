@@ -47,3 +47,18 @@ def test_a_window_on_an_edge_that_only_runs_along_the_row_is_not_trusted():
     d, best, second = _block_match(left, right, middle, 5, 120, params.end_window_px)
     print(f"along the top edge: NCC {best[0]:.3f}, 3 px away {second[0]:.3f}")
     assert best[0] > 0.95 and not _peak_trusted(best, second, params)[0]
+
+
+def test_a_disparity_range_too_narrow_for_the_peak_test_gives_no_segments_and_no_error():
+    # a baseline of 0.1 mm leaves 0 to 1 px of disparity in the depth range (a fuzzed calibration)
+    from dataclasses import replace
+
+    from accumcli.extract import ExtractParams, extract_frame
+
+    from .scenes import render_pair, rotated_square
+
+    square, _ = rotated_square((0.0, 0.0), 0.05, 3.0, 0.5)
+    frame = render_pair([square], seed=2)
+    assert extract_frame(frame, ExtractParams()).counts["critical_3d"] >= 6
+    tiny = replace(frame, intrinsics=replace(frame.intrinsics, baseline=1e-4))
+    assert extract_frame(tiny, ExtractParams()).counts["critical_3d"] == 0
