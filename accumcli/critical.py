@@ -134,14 +134,13 @@ def _junction_disparity(ends: np.ndarray, matched: Segments, matched_2d: Segment
     out = np.full(len(ends), np.nan)
     if len(matched) == 0:
         return out
-    corner_2d = matched_2d.endpoints().reshape(-1, 2)
-    hits = cKDTree(corner_2d).query_ball_point(ends, radius_px, return_length=True)
-    if not hits.any():
+    distance, nearest = cKDTree(matched_2d.endpoints().reshape(-1, 2)).query(ends, distance_upper_bound=radius_px)
+    met = np.flatnonzero(np.isfinite(distance))
+    if len(met) == 0:
         return out
-    distance, nearest = cKDTree(corner_2d).query(ends[hits > 0])
-    k = nearest // 2
+    k = nearest[met] // 2
     c, d = matched.centers[k], matched.directions[k]
-    slope = (ends[hits > 0, 1] - intr.cy) / intr.fy            # the end's row as y / z
+    slope = (ends[met, 1] - intr.cy) / intr.fy            # the end's row as y / z
     denominator = d[:, 1] - slope * d[:, 2]
     with np.errstate(divide="ignore", invalid="ignore"):
         lam = (slope * c[:, 2] - c[:, 1]) / denominator
@@ -149,7 +148,7 @@ def _junction_disparity(ends: np.ndarray, matched: Segments, matched_2d: Segment
         disparity = intr.fx * intr.baseline / z
     # the point must lie near the 3D segment (within its half length and the radius beyond)
     near = np.abs(lam) <= matched.lengths[k] / 2 * (1 + 2 * radius_px / np.maximum(matched_2d.lengths[k], 1.0))
-    out[np.flatnonzero(hits > 0)] = np.where(near & (z > 0) & (np.abs(denominator) > 1e-6), disparity, np.nan)
+    out[met] = np.where(near & (z > 0) & (np.abs(denominator) > 1e-6), disparity, np.nan)
     return out
 
 
@@ -289,6 +288,7 @@ def triangulate_critical(left_img: np.ndarray, right_img: np.ndarray, left: Segm
     sigma_d = sigma_end * np.sqrt((1 - a_c) ** 2 + a_c ** 2)
     slope_sigma = sigma_end * np.sqrt(2.0) / span           # px of disparity per px along the line
     sigma_direction = np.arctan2(depth_per_disparity * slope_sigma * 2 * half_t, np.maximum(length, 1e-9))
+    # confidence (the stereo score): the least a trusted end scores, as a piece has no patch score of its own
     score = np.full(len(seg), params.end_min_ncc)
     segments = Segments(frame_id, p_c, direction_3d, length, score, np.ones(len(seg), np.int64),
                         {"sigma_depth_m": depth_per_disparity * sigma_d, "sigma_direction_rad": sigma_direction,
