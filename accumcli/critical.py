@@ -51,21 +51,22 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from scipy.spatial import cKDTree
 
-from .grouping import group_range
 from .lines2d import Gradients, Segments2D, parabola_peak, sample
 from .recording import StereoIntrinsics
 from .segments import Segments
 from .stereo import StereoParams, angle_from_rows, backproject
 
 
-def _runs(left: Segments2D, index: np.ndarray, gap_px: float) -> tuple[np.ndarray, np.ndarray]:
-    """Segments ``index`` sorted along their lines, and (len(index),) run numbers 0..R-1."""
+def _runs(left: Segments2D, index: np.ndarray, gap_px: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The runs of segments ``index`` along their lines: per run (R,) its first segment (sorted
+    along the line), and where it starts and ends along the line (``Segments2D.t``, px)."""
     order = index[np.lexsort((left.t[index], left.line_id[index]))]
     start = left.t[order] - left.lengths[order] / 2
     end = left.t[order] + left.lengths[order] / 2
     new = np.ones(len(order), bool)
     new[1:] = (left.line_id[order[1:]] != left.line_id[order[:-1]]) | (start[1:] > end[:-1] + gap_px)
-    return order, np.cumsum(new) - 1
+    first = np.flatnonzero(new)           # a run's segments follow each other in ``order``
+    return order[first], np.minimum.reduceat(start, first), np.maximum.reduceat(end, first)
 
 
 def _block_match(left_img: np.ndarray, right_img: np.ndarray, ends: np.ndarray, d_lo: int, d_hi: int,
@@ -183,11 +184,7 @@ def triangulate_critical(left_img: np.ndarray, right_img: np.ndarray, left: Segm
     none = Segments.empty(frame_id), np.zeros(0, np.int64)
     if len(critical) == 0 or not params.critical_by_ends:
         return none
-    order, run = _runs(left, critical, params.end_gap_px)
-    n_runs = int(run.max()) + 1
-    lo, _ = group_range(run, n_runs, left.t[order] - left.lengths[order] / 2)
-    _, hi = group_range(run, n_runs, left.t[order] + left.lengths[order] / 2)
-    ref = order[np.flatnonzero(np.r_[True, run[1:] != run[:-1]])]   # one segment per run places its line
+    ref, lo, hi = _runs(left, critical, params.end_gap_px)       # the first segment places a run's line
     base = left.centers[ref] - left.t[ref, None] * left.line_direction[ref]   # each run's line at t = 0
     ends = np.concatenate([base + lo[:, None] * left.line_direction[ref],
                            base + hi[:, None] * left.line_direction[ref]])     # (2R, 2) px
@@ -209,8 +206,8 @@ def triangulate_critical(left_img: np.ndarray, right_img: np.ndarray, left: Segm
         # at a silhouette corner half the window is background, seen differently by the two
         # cameras: the window beside the end, on its own edge's side, may match where that fails
         retry = np.flatnonzero(~by_block)
-        inner = ends[retry] - outward[retry] * params.end_window_px
-        d_in, best_in, second_in = _block_match(left_img, right_img, inner, d_lo, d_hi, params.end_window_px)
+        beside = ends[retry] - outward[retry] * params.end_window_px
+        d_in, best_in, second_in = _block_match(left_img, right_img, beside, d_lo, d_hi, params.end_window_px)
         sure = _peak_trusted(best_in, second_in, params)
         disparity[retry[sure]], by_block[retry[sure]] = d_in[sure], True
     if matched is not None and params.end_junctions:
@@ -229,45 +226,40 @@ def triangulate_critical(left_img: np.ndarray, right_img: np.ndarray, left: Segm
     across = np.abs(rel[..., 0] * direction[:, None, 1] - rel[..., 1] * direction[:, None, 0])
     parallel = np.abs(np.einsum("kc,ec->ke", direction, left.line_direction[end_ref])) >= np.cos(np.radians(3.0))
     on_line = (across <= params.end_across_px) & parallel
-    half = left.lengths[critical, None] / 2
-    before = np.where(on_line & (along <= -half + params.end_gap_px), along, -np.inf)
-    after = np.where(on_line & (along >= half - params.end_gap_px), along, np.inf)
+    half_length = left.lengths[critical, None] / 2
+    before = np.where(on_line & (along <= -half_length + params.end_gap_px), along, -np.inf)
+    after = np.where(on_line & (along >= half_length - params.end_gap_px), along, np.inf)
     e0, e1 = np.argmax(before, axis=1), np.argmin(after, axis=1)
-    rows = np.arange(len(critical))
-    t0, t1 = before[rows, e0], after[rows, e1]
-    span = t1 - t0
-    ok = np.isfinite(span) & (span >= params.end_min_run_px)
+    t0 = before[np.arange(len(critical)), e0]                      # the ends, along the segment's line
+    span = after[np.arange(len(critical)), e1] - t0
     # depth ratio of the two ends (disparity ratio): an edge behind an occluding contour ends there,
     # and the window at that end matches the occluder, much nearer than the edge's other end
     ratio = np.maximum(disparity[e0], disparity[e1]) / np.minimum(disparity[e0], disparity[e1])
-    ok &= ratio <= params.end_max_depth_ratio
-    seg, e0, e1, t0, t1, span = (x[ok] for x in (critical, e0, e1, t0, t1, span))
-    if len(seg) == 0:
+    rows = np.flatnonzero(np.isfinite(span) & (span >= params.end_min_run_px) & (ratio <= params.end_max_depth_ratio))
+    if len(rows) == 0:
         return none
     # where the block match is sure inside the span too (texture beside the edge), it must agree
-    spans, span_of = np.unique(np.stack([e0, e1], 1), axis=0, return_inverse=True)
+    spans, span_of = np.unique(np.stack([e0[rows], e1[rows]], 1), axis=0, return_inverse=True)
     fractions = np.array([0.25, 0.5, 0.75])
-    inner = (ends[spans[:, 0], None, :] + fractions[None, :, None] * (ends[spans[:, 1]] - ends[spans[:, 0]])[:, None, :])
+    inside = ends[spans[:, 0], None, :] + fractions[None, :, None] * (ends[spans[:, 1]] - ends[spans[:, 0]])[:, None, :]
     predicted = disparity[spans[:, 0], None] + fractions[None, :] * (disparity[spans[:, 1]] - disparity[spans[:, 0]])[:, None]
-    d_inner, best_inner, second_inner = _block_match(left_img, right_img, inner.reshape(-1, 2), d_lo, d_hi,
-                                                     params.end_window_px)
-    sure_inner = _peak_trusted(best_inner, second_inner, params)
-    against = sure_inner & (np.abs(d_inner - predicted.ravel()) > params.end_agree_px)
-    consistent = ~against.reshape(-1, 3).any(axis=1)
-    ok = consistent[span_of.ravel()]
-    seg, e0, e1, t0, t1, span = (x[ok] for x in (seg, e0, e1, t0, t1, span))
-    if len(seg) == 0:
+    d_inside, best_inside, second_inside = _block_match(left_img, right_img, inside.reshape(-1, 2), d_lo, d_hi,
+                                                        params.end_window_px)
+    against = _peak_trusted(best_inside, second_inside, params) & (np.abs(d_inside - predicted.ravel()) > params.end_agree_px)
+    rows = rows[~against.reshape(-1, 3).any(axis=1)[span_of.ravel()]]
+    if len(rows) == 0:
         return none
     # the left image shows the edge all the way between the two ends, the right one where predicted
     s = np.linspace(0.0, 1.0, 24)[None, :, None]
-    path = ends[e0][:, None, :] + s * (ends[e1] - ends[e0])[:, None, :]           # (K, S, 2)
-    normal = np.column_stack([-left.line_direction[seg, 1], left.line_direction[seg, 0]])
-    d_path = disparity[e0][:, None] + s[..., 0] * (disparity[e1] - disparity[e0])[:, None]
+    path = ends[e0[rows]][:, None, :] + s * (ends[e1[rows]] - ends[e0[rows]])[:, None, :]     # (K, S, 2)
+    normal = np.column_stack([-direction[rows, 1], direction[rows, 0]])
+    d_path = disparity[e0[rows]][:, None] + s[..., 0] * (disparity[e1[rows]] - disparity[e0[rows]])[:, None]
     right_path = np.stack([path[..., 0] - d_path, path[..., 1]], axis=-1)
-    ok = (_shown(grads[0], path, normal) >= params.end_continuity) & (_shown(grads[1], right_path, normal) >= params.end_verify)
-    seg, e0, e1, t0, t1, span = (x[ok] for x in (seg, e0, e1, t0, t1, span))
-    if len(seg) == 0:
+    rows = rows[(_shown(grads[0], path, normal) >= params.end_continuity)
+                & (_shown(grads[1], right_path, normal) >= params.end_verify)]
+    if len(rows) == 0:
         return none
+    seg, e0, e1, t0, span = critical[rows], e0[rows], e1[rows], t0[rows], span[rows]
     d0, d1 = disparity[e0], disparity[e1]
     direction = left.line_direction[seg]
     center = left.centers[seg]

@@ -46,7 +46,8 @@ def _times(times, frames: int, label: str = "time per frame") -> str:
 def extraction_lines(result) -> list[str]:
     return [f"{result.frames} frames: {result.per_frame('segments'):.0f} 3D segments per frame from "
             f"{result.per_frame('left_2d'):.0f} left 2D segments ({result.per_frame('critical'):.0f} critical, "
-            f"{result.per_frame('critical_3d'):.0f} of them triangulated from their ends, {result.per_frame('unmatched'):.0f} unmatched), {result.pairs_per_second:.1f} pairs/s",
+            f"{result.per_frame('critical_3d'):.0f} of them triangulated from their ends, "
+            f"{result.per_frame('unmatched'):.0f} unmatched), {result.pairs_per_second:.1f} pairs/s",
             _times(result.times, result.frames)]
 
 
