@@ -69,6 +69,18 @@ def _runs(left: Segments2D, index: np.ndarray, gap_px: float) -> tuple[np.ndarra
     return order[first], np.minimum.reduceat(start, first), np.maximum.reduceat(end, first)
 
 
+def _patches(img: np.ndarray, top: np.ndarray, left: np.ndarray, rows: int, columns: int) -> np.ndarray:
+    """(M, rows, columns) copies of ``img`` from (``top``, ``left``) (M,) px, the border pixels
+    repeated beyond the image (as clipping the indices would): one strided gather of a padded
+    image's sliding windows instead of fancy indexing with (M, rows, columns) index arrays."""
+    height, width = img.shape
+    pad_top, pad_left = max(0, -int(top.min())), max(0, -int(left.min()))
+    pad_bottom = max(0, int(top.max()) + rows - height)
+    pad_right = max(0, int(left.max()) + columns - width)
+    padded = np.pad(img, ((pad_top, pad_bottom), (pad_left, pad_right)), mode="edge")
+    return sliding_window_view(padded, (rows, columns))[top + pad_top, left + pad_left]
+
+
 def _block_match(left_img: np.ndarray, right_img: np.ndarray, ends: np.ndarray, d_lo: int, d_hi: int,
                  w: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per end (M, 2) (u, v) px in the left image: the disparity (M,) px of the best NCC of its
@@ -77,16 +89,15 @@ def _block_match(left_img: np.ndarray, right_img: np.ndarray, ends: np.ndarray, 
     Windows sit on whole pixels (the end rounded): the sums are then exact integers, so the
     result does not depend on the summation order, which numpy's SIMD loops choose by memory
     alignment (the same bytes out in every process)."""
-    height, width = left_img.shape
     column = np.rint(ends[:, 0]).astype(np.int64)
-    offsets = np.arange(-w, w + 1)
+    row = np.rint(ends[:, 1]).astype(np.int64)
     h = 2 * w + 1
-    rows = np.clip(np.rint(ends[:, 1]).astype(np.int64)[:, None, None] + offsets[None, :, None], 0, height - 1)
-    window = left_img[rows, np.clip(column[:, None, None] + offsets, 0, width - 1)].astype(np.float32)   # (M, h, h)
-    strip_columns = np.clip(column[:, None, None] - d_hi - w + np.arange(d_hi - d_lo + 2 * w + 1), 0, width - 1)
-    strip = right_img[rows, strip_columns].astype(np.float32)                                # (M, h, D + 2w)
-    # integer grey levels: the window products and their sums are integers under 2^24, exact in float32
-    cross = np.einsum("myx,mydx->md", window, sliding_window_view(strip, h, axis=2))
+    window = _patches(left_img, row - w, column - w, h, h).astype(np.float32)                 # (M, h, h)
+    strip = _patches(right_img, row - w, column - d_hi - w, h, d_hi - d_lo + h).astype(np.float32)   # (M, h, D + 2w)
+    shifts = strip.shape[2] - h + 1
+    cross = np.zeros((len(ends), shifts), np.float32)
+    for x in range(h):        # a batched (1, h) @ (h, D) product per window column: 5x einsum's speed
+        cross += np.matmul(window[:, None, :, x], strip[:, :, x:x + shifts])[:, 0]
     column_sums = np.concatenate([np.zeros((len(ends), 2, 1)), np.cumsum(np.stack(
         [strip.sum(axis=1, dtype=np.float64), (strip * strip).sum(axis=1, dtype=np.float64)], 1), axis=2)], 2)
     sum_b, square_b = (column_sums[:, i, h:] - column_sums[:, i, :-h] for i in (0, 1))         # (M, D) each
