@@ -41,6 +41,7 @@ from scipy.spatial import cKDTree
 
 from .chain_kernel import straight_chain_labels
 from .grouping import group_range
+from .pair_kernel import collinear_pairs
 from .lines2d import (EdgePoints, Gradients, LineParams, Segments2D, StageTimes, _canonical, _weighted_line_fit,
                       detection_start, edge_points, local_segments, refine_on_gradient)
 
@@ -106,14 +107,12 @@ def collinear_lines(points: EdgePoints, chains: np.ndarray, reach_px: float, max
     t = np.sum((xy - center[lab]) * direction[lab], axis=1)
     t_lo, t_hi = group_range(lab, n, t)
     ends = np.concatenate([center + t_lo[:, None] * direction, center + t_hi[:, None] * direction])
-    chain_of = np.concatenate([np.arange(n), np.arange(n)])
-    pairs = cKDTree(ends).query_pairs(reach_px, output_type="ndarray")
-    i, j = chain_of[pairs[:, 0]], chain_of[pairs[:, 1]]
+    pairs = cKDTree(ends).query_pairs(reach_px, output_type="ndarray").astype(np.int64)
     normal = np.column_stack([-direction[:, 1], direction[:, 0]])
-    ok = (i != j) & (np.abs(np.sum(direction[i] * direction[j], axis=1)) >= np.cos(np.radians(max_deg)))
-    ok &= np.abs(np.sum((ends[pairs[:, 1]] - center[i]) * normal[i], axis=1)) <= max_offset_px
-    ok &= np.abs(np.sum((ends[pairs[:, 0]] - center[j]) * normal[j], axis=1)) <= max_offset_px
-    graph = csr_matrix((np.ones(int(ok.sum()), np.int8), (i[ok], j[ok])), shape=(n, n))
+    ok = collinear_pairs(pairs, ends, center, direction, normal, float(np.cos(np.radians(max_deg))),
+                         float(max_offset_px))
+    i, j = pairs[ok, 0] % n, pairs[ok, 1] % n
+    graph = csr_matrix((np.ones(len(i), np.int8), (i, j)), shape=(n, n))
     return connected_components(graph, directed=False)[1].astype(np.int64)
 
 

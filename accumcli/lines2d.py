@@ -46,6 +46,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .errors import InputError
+from .pair_kernel import junction_growth
 
 
 @dataclass(frozen=True)
@@ -511,25 +512,13 @@ def _complete_junctions(t_lo, t_hi, centers, directions, line, params: LineParam
     radius = params.junction_radius_px
     ends = np.concatenate([centers + t_lo[:, None] * directions, centers + t_hi[:, None] * directions])
     n = len(t_lo)
-    run_of = np.concatenate([np.arange(n), np.arange(n)])
     outward = np.concatenate([-directions, directions])
     pairs = cKDTree(ends).query_pairs(2 * radius, output_type="ndarray")
     if len(pairs) == 0:
         return t_lo, t_hi
-    p, q = pairs[:, 0], pairs[:, 1]
-    d1, d2 = directions[run_of[p]], directions[run_of[q]]
-    cross = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
-    ok = (line[run_of[p]] != line[run_of[q]]) & (np.abs(cross) > np.sin(np.radians(20)))
-    p, q, d1, d2, cross = p[ok], q[ok], d1[ok], d2[ok], cross[ok]
-    # intersection c1 + a d1 = c2 + b d2
-    diff = centers[run_of[q]] - centers[run_of[p]]
-    a = (diff[:, 0] * d2[:, 1] - diff[:, 1] * d2[:, 0]) / cross
-    meet = centers[run_of[p]] + a[:, None] * d1
-    grow_p = np.sum((meet - ends[p]) * outward[p], axis=1)
-    grow_q = np.sum((meet - ends[q]) * outward[q], axis=1)
-    ok = (grow_p >= -1.0) & (grow_p <= radius) & (grow_q >= -1.0) & (grow_q <= radius)
-    grow = np.zeros(2 * n)
-    np.maximum.at(grow, np.concatenate([p[ok], q[ok]]), np.concatenate([grow_p[ok], grow_q[ok]]))
+    grow = junction_growth(pairs.astype(np.int64), ends, outward, np.ascontiguousarray(centers, np.float64),
+                           np.ascontiguousarray(directions, np.float64), np.ascontiguousarray(line, np.int64),
+                           float(radius), float(np.sin(np.radians(20))))
     return t_lo - grow[:n], t_hi + grow[n:]
 
 
