@@ -37,11 +37,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
 from .chain_kernel import straight_chain_labels
 from .grouping import group_range
-from .pair_kernel import collinear_pairs
+from .pair_kernel import collinear_links
 from .lines2d import (EdgePoints, Gradients, LineParams, Segments2D, StageTimes, _canonical, _weighted_line_fit,
                       detection_start, edge_points, local_segments, refine_on_gradient)
 
@@ -107,11 +106,10 @@ def collinear_lines(points: EdgePoints, chains: np.ndarray, reach_px: float, max
     t = np.sum((xy - center[lab]) * direction[lab], axis=1)
     t_lo, t_hi = group_range(lab, n, t)
     ends = np.concatenate([center + t_lo[:, None] * direction, center + t_hi[:, None] * direction])
-    pairs = cKDTree(ends).query_pairs(reach_px, output_type="ndarray").astype(np.int64)
     normal = np.column_stack([-direction[:, 1], direction[:, 0]])
-    ok = collinear_pairs(pairs, ends, center, direction, normal, float(np.cos(np.radians(max_deg))),
-                         float(max_offset_px))
-    i, j = pairs[ok, 0] % n, pairs[ok, 1] % n
+    links = collinear_links(ends, center, direction, normal, float(reach_px), float(max_deg),
+                            float(np.cos(np.radians(max_deg))), float(max_offset_px))
+    i, j = links[:, 0], links[:, 1]
     graph = csr_matrix((np.ones(len(i), np.int8), (i, j)), shape=(n, n))
     return connected_components(graph, directed=False)[1].astype(np.int64)
 

@@ -43,7 +43,6 @@ from functools import cached_property
 
 import cv2
 import numpy as np
-from scipy.spatial import cKDTree
 
 from .errors import InputError
 from .pair_kernel import junction_growth
@@ -513,12 +512,9 @@ def _complete_junctions(t_lo, t_hi, centers, directions, line, params: LineParam
     ends = np.concatenate([centers + t_lo[:, None] * directions, centers + t_hi[:, None] * directions])
     n = len(t_lo)
     outward = np.concatenate([-directions, directions])
-    pairs = cKDTree(ends).query_pairs(2 * radius, output_type="ndarray")
-    if len(pairs) == 0:
-        return t_lo, t_hi
-    grow = junction_growth(pairs.astype(np.int64), ends, outward, np.ascontiguousarray(centers, np.float64),
+    grow = junction_growth(ends, outward, np.ascontiguousarray(centers, np.float64),
                            np.ascontiguousarray(directions, np.float64), np.ascontiguousarray(line, np.int64),
-                           float(radius), float(np.sin(np.radians(20))))
+                           float(2 * radius), float(radius), float(np.sin(np.radians(20))), 20.0)
     return t_lo - grow[:n], t_hi + grow[n:]
 
 

@@ -1,13 +1,17 @@
-"""Compiled tests over the near pairs of line ends that 2D detection finds with a KD-tree:
-``lines2d._complete_junctions`` (runs meeting at a corner) and ``edge_chains.collinear_lines``
-(chains on one line).
+"""Compiled tests over the near pairs of line ends in 2D detection: ``lines2d._complete_junctions``
+(runs meeting at a corner) and ``edge_chains.collinear_lines`` (chains on one line).
 
-Why compiled (numba, installed as a wheel): on a textured real image (teabox: print on the box, grain,
-floor tiles) about 110,000 pairs of ends lie within 14 px of each other, and the numpy version
-gathered and combined a dozen (pairs, 2) arrays per call: 11 ms of a call's 14, a quarter of the
-detection time there. The loop here touches each pair once, with the same arithmetic in the same
+Why compiled (numba, installed as a wheel): on a textured image (teabox: print on the box, grain,
+floor tiles; the simulator's random backgrounds) 100,000 to 600,000 pairs of ends lie within 14 px
+of each other. Listing them with a KD-tree (``cKDTree.query_pairs``) and testing them in numpy
+gathered a dozen (pairs, 2) arrays per call: 14 ms per call on teabox, 30 on sim_108. Here the ends
+are binned by their line's direction and by position (``_binned``), only the bins a test can pass
+are searched (collinear: the neighbouring directions; a corner: every other direction, since two
+lines in one bin are too parallel to meet), and each pair within reach (squared distance at most
+its square, as the KD-tree's) is tested where it is found, with the same arithmetic in the same
 order as the numpy expressions it replaced (no fused multiply-add: numba does not contract without
-fastmath), so the results are the same bits.
+fastmath). Growth is a maximum and the collinear pairs only join components, so the order in which
+pairs are found does not matter: the results are the same bits.
 """
 
 from __future__ import annotations
@@ -18,53 +22,162 @@ from .jit import kernel
 
 
 @kernel
-def junction_growth(pairs, ends, outward, centers, directions, line, radius, min_sin):  # pragma: no cover
+def _binned(ends, direction, bins, reach):  # pragma: no cover
+    """Ends (2K, 2) px (the K lines' low ends, then their high ends; ``direction`` (K, 2) of each
+    line) binned by the line's direction (``bins`` over the half turn) and by position (cells at
+    least ``reach`` wide, wider where that would make far more cells than ends). Returns (usable
+    (2K,) bool: finite end and direction, key (2K, 3) int64 (bin, row, column), start (R C B + 1,)
+    of each cell-and-bin's run in ``order`` (2K,), the bins of a cell one after the other, rows,
+    columns)."""
+    k_lines = len(direction)
+    m = len(ends)
+    usable = np.zeros(m, np.bool_)
+    x0, y0, x1, y1 = np.inf, np.inf, -np.inf, -np.inf
+    for e in range(m):
+        c = e - k_lines if e >= k_lines else e
+        usable[e] = (np.isfinite(ends[e, 0]) and np.isfinite(ends[e, 1]) and np.isfinite(direction[c, 0])
+                     and np.isfinite(direction[c, 1]))
+        if usable[e]:
+            x0, y0, x1, y1 = min(x0, ends[e, 0]), min(y0, ends[e, 1]), max(x1, ends[e, 0]), max(y1, ends[e, 1])
+    size = reach
+    if usable.any():
+        while bins * ((x1 - x0) // size + 1) * ((y1 - y0) // size + 1) > 64 * m + 100_000:
+            size *= 2
+    key = np.zeros((m, 3), np.int64)
+    for e in range(m):
+        if usable[e]:
+            c = e - k_lines if e >= k_lines else e
+            angle = np.arctan2(direction[c, 1], direction[c, 0]) % np.pi
+            key[e, 0] = min(int(angle / np.pi * bins), bins - 1)
+            key[e, 1] = int((ends[e, 1] - y0) // size)
+            key[e, 2] = int((ends[e, 0] - x0) // size)
+    rows, columns = key[:, 1].max() + 1, key[:, 2].max() + 1
+    start = np.zeros(bins * rows * columns + 1, np.int64)
+    for e in range(m):
+        if usable[e]:
+            start[(key[e, 1] * columns + key[e, 2]) * bins + key[e, 0] + 1] += 1
+    for c in range(len(start) - 1):
+        start[c + 1] += start[c]
+    fill = start[:-1].copy()
+    order = np.empty(m, np.int64)
+    for e in range(m):
+        if usable[e]:
+            c = (key[e, 1] * columns + key[e, 2]) * bins + key[e, 0]
+            order[fill[c]] = e
+            fill[c] += 1
+    return usable, key, start, order, rows, columns
+
+
+@kernel
+def junction_growth(ends, outward, centers, directions, line, reach, radius, min_sin, parallel_deg):  # pragma: no cover
     """(2N,) how far each run end (``ends`` (2N, 2) px: the N runs' low ends, then their high ends;
     ``outward`` (2N, 2) their outward unit directions) grows to meet another line's run: for every
-    pair of ends (``pairs`` (P, 2) int64) of runs on different lines (``line`` (N,)) whose
-    directions (``directions`` (N, 2), through ``centers`` (N, 2)) cross at more than ``min_sin``,
-    both grow to the lines' intersection when it lies at most ``radius`` px beyond each end and
-    less than 1 px behind it; an end keeps the largest growth."""
+    pair of ends within ``reach`` px of runs on different lines (``line`` (N,)) whose directions
+    (``directions`` (N, 2), through ``centers`` (N, 2)) cross at more than ``min_sin`` (the sine of
+    ``parallel_deg``), both grow to the lines' intersection when it lies at most ``radius`` px
+    beyond each end and less than 1 px behind it; an end keeps the largest growth."""
     n = len(line)
     grow = np.zeros(2 * n)
-    for k in range(len(pairs)):
-        p, q = pairs[k, 0], pairs[k, 1]
+    if n == 0:
+        return grow
+    bins = int(np.ceil(180.0 / (0.95 * parallel_deg)))     # one bin is too narrow for two lines to meet
+    usable, key, start, order, rows, columns = _binned(ends, directions, bins, reach)
+    r2 = reach * reach
+    for p in range(2 * n):
+        if not usable[p]:
+            continue
         rp = p - n if p >= n else p
-        rq = q - n if q >= n else q
-        if line[rp] == line[rq]:
-            continue
-        d1x, d1y, d2x, d2y = directions[rp, 0], directions[rp, 1], directions[rq, 0], directions[rq, 1]
-        cross = d1x * d2y - d1y * d2x
-        if not abs(cross) > min_sin:
-            continue
-        diffx, diffy = centers[rq, 0] - centers[rp, 0], centers[rq, 1] - centers[rp, 1]
-        a = (diffx * d2y - diffy * d2x) / cross
-        meetx, meety = centers[rp, 0] + a * d1x, centers[rp, 1] + a * d1y
-        grow_p = (meetx - ends[p, 0]) * outward[p, 0] + (meety - ends[p, 1]) * outward[p, 1]
-        grow_q = (meetx - ends[q, 0]) * outward[q, 0] + (meety - ends[q, 1]) * outward[q, 1]
-        if grow_p >= -1.0 and grow_p <= radius and grow_q >= -1.0 and grow_q <= radius:
-            grow[p] = max(grow[p], grow_p)
-            grow[q] = max(grow[q], grow_q)
+        for dy in range(-1, 2):
+            row = key[p, 1] + dy
+            if row < 0 or row >= rows:
+                continue
+            for dx in range(-1, 2):
+                column = key[p, 2] + dx
+                if column < 0 or column >= columns:
+                    continue
+                base = (row * columns + column) * bins
+                own = base + key[p, 0]
+                for part in range(2):        # the cell's other bins: before and after p's own
+                    first, last = (start[base], start[own]) if part == 0 else (start[own + 1], start[base + bins])
+                    for k in range(first, last):
+                        q = order[k]
+                        if q <= p:
+                            continue
+                        ex, ey = ends[q, 0] - ends[p, 0], ends[q, 1] - ends[p, 1]
+                        if ex * ex + ey * ey > r2:
+                            continue
+                        rq = q - n if q >= n else q
+                        if line[rp] == line[rq]:
+                            continue
+                        d1x, d1y, d2x, d2y = directions[rp, 0], directions[rp, 1], directions[rq, 0], directions[rq, 1]
+                        cross = d1x * d2y - d1y * d2x
+                        if not abs(cross) > min_sin:
+                            continue
+                        diffx, diffy = centers[rq, 0] - centers[rp, 0], centers[rq, 1] - centers[rp, 1]
+                        a = (diffx * d2y - diffy * d2x) / cross
+                        meetx, meety = centers[rp, 0] + a * d1x, centers[rp, 1] + a * d1y
+                        grow_p = (meetx - ends[p, 0]) * outward[p, 0] + (meety - ends[p, 1]) * outward[p, 1]
+                        grow_q = (meetx - ends[q, 0]) * outward[q, 0] + (meety - ends[q, 1]) * outward[q, 1]
+                        if grow_p >= -1.0 and grow_p <= radius and grow_q >= -1.0 and grow_q <= radius:
+                            grow[p] = max(grow[p], grow_p)
+                            grow[q] = max(grow[q], grow_q)
     return grow
 
 
 @kernel
-def collinear_pairs(pairs, ends, center, direction, normal, min_cos, max_offset_px):  # pragma: no cover
-    """(P,) bool: the pairs of chain ends (``pairs`` (P, 2) int64 into ``ends`` (2K, 2) px: the K
-    chains' low ends, then their high ends) of two different chains whose directions (``direction``
-    (K, 2), lines through ``center`` (K, 2), ``normal`` (K, 2)) agree within ``min_cos`` and whose
-    ends lie within ``max_offset_px`` of the other chain's line."""
+def collinear_links(ends, center, direction, normal, reach_px, max_deg, min_cos, max_offset_px):  # pragma: no cover
+    """(L, 2) int64 pairs of chains (``ends`` (2K, 2) px: the K chains' low ends, then their high
+    ends; lines through ``center`` (K, 2) along ``direction`` (K, 2), ``normal`` (K, 2)) with ends
+    within ``reach_px`` of each other, directions within ``max_deg`` (|cos| at least ``min_cos``, its
+    cosine as numpy computes it) and each end within ``max_offset_px`` of the other chain's line.
+    Only ends in neighbouring direction bins (at least 1.01 ``max_deg`` wide, around the half turn)
+    are compared."""
     k_chains = len(center)
-    ok = np.zeros(len(pairs), np.bool_)
-    for k in range(len(pairs)):
-        p, q = pairs[k, 0], pairs[k, 1]
-        i = p - k_chains if p >= k_chains else p
-        j = q - k_chains if q >= k_chains else q
-        if i == j:
-            continue
-        if not abs(direction[i, 0] * direction[j, 0] + direction[i, 1] * direction[j, 1]) >= min_cos:
-            continue
-        if not abs((ends[q, 0] - center[i, 0]) * normal[i, 0] + (ends[q, 1] - center[i, 1]) * normal[i, 1]) <= max_offset_px:
-            continue
-        ok[k] = abs((ends[p, 0] - center[j, 0]) * normal[j, 0] + (ends[p, 1] - center[j, 1]) * normal[j, 1]) <= max_offset_px
-    return ok
+    m = len(ends)
+    links = np.empty((0, 2), np.int64)
+    if m < 2:
+        return links
+    bins = max(1, int(np.pi / (np.radians(max_deg) * 1.01)))
+    usable, key, start, order, rows, columns = _binned(ends, direction, bins, reach_px)
+    r2 = reach_px * reach_px
+    lowest = -1 if bins >= 3 else 0          # neighbouring bins, each once (-1 and +1 are one bin of two)
+    highest = 2 if bins >= 3 else bins
+    for writing in (False, True):
+        found = 0
+        for p in range(m):
+            if not usable[p]:
+                continue
+            i = p - k_chains if p >= k_chains else p
+            for dy in range(-1, 2):
+                row = key[p, 1] + dy
+                if row < 0 or row >= rows:
+                    continue
+                for dx in range(-1, 2):
+                    column = key[p, 2] + dx
+                    if column < 0 or column >= columns:
+                        continue
+                    for db in range(lowest, highest):
+                        c = (row * columns + column) * bins + (key[p, 0] + db) % bins
+                        for k in range(start[c], start[c + 1]):
+                            q = order[k]
+                            if q <= p:
+                                continue
+                            ex, ey = ends[q, 0] - ends[p, 0], ends[q, 1] - ends[p, 1]
+                            if ex * ex + ey * ey > r2:
+                                continue
+                            j = q - k_chains if q >= k_chains else q
+                            if i == j or not abs(direction[i, 0] * direction[j, 0]
+                                                 + direction[i, 1] * direction[j, 1]) >= min_cos:
+                                continue
+                            if not abs((ends[q, 0] - center[i, 0]) * normal[i, 0]
+                                       + (ends[q, 1] - center[i, 1]) * normal[i, 1]) <= max_offset_px:
+                                continue
+                            if not abs((ends[p, 0] - center[j, 0]) * normal[j, 0]
+                                       + (ends[p, 1] - center[j, 1]) * normal[j, 1]) <= max_offset_px:
+                                continue
+                            if writing:
+                                links[found, 0], links[found, 1] = i, j
+                            found += 1
+        if not writing:
+            links = np.empty((found, 2), np.int64)
+    return links

@@ -287,26 +287,35 @@ def test_group_range_is_the_min_and_max_per_group():
 
 
 def test_pair_kernels_grow_runs_to_their_corner_and_join_collinear_chains_only():
-    from accumcli.pair_kernel import collinear_pairs, junction_growth
+    from accumcli.pair_kernel import collinear_links, junction_growth
 
+    sin20 = np.sin(np.radians(20))
     # two runs: along x ending at x = 7 and along y ending at y = 6; the lines meet at (10, 10)
     centers = np.array([[0.0, 10.0], [10.0, 0.0]])
     directions = np.array([[1.0, 0.0], [0.0, 1.0]])
     t_lo, t_hi = np.array([-5.0, -5.0]), np.array([7.0, 6.0])
     ends = np.concatenate([centers + t_lo[:, None] * directions, centers + t_hi[:, None] * directions])
     outward = np.concatenate([-directions, directions])
-    pairs = np.array([[2, 3]], np.int64)                       # the two high ends
-    grow = junction_growth(pairs, ends, outward, centers, directions, np.array([0, 1]), 7.0, np.sin(np.radians(20)))
+    grow = junction_growth(ends, outward, centers, directions, np.array([0, 1]), 14.0, 7.0, sin20, 20.0)
     assert np.allclose(grow, [0.0, 0.0, 3.0, 4.0])
-    # the same runs on one line, or too far from the corner (radius 3), do not grow
-    assert not junction_growth(pairs, ends, outward, centers, directions, np.array([0, 0]), 7.0, 0.34).any()
-    assert not junction_growth(pairs, ends, outward, centers, directions, np.array([0, 1]), 3.0, 0.34).any()
+    # the same runs on one line, too far from the corner (radius 3) or out of reach do not grow
+    assert not junction_growth(ends, outward, centers, directions, np.array([0, 0]), 14.0, 7.0, sin20, 20.0).any()
+    assert not junction_growth(ends, outward, centers, directions, np.array([0, 1]), 14.0, 3.0, sin20, 20.0).any()
+    assert not junction_growth(ends, outward, centers, directions, np.array([0, 1]), 2.0, 7.0, sin20, 20.0).any()
+    # runs 10 degrees apart do not meet; a non-finite end meets nothing
+    tilted = np.array([[1.0, 0.0], [np.cos(np.radians(10)), np.sin(np.radians(10))]])
+    assert not junction_growth(ends, np.concatenate([-tilted, tilted]), centers, tilted, np.array([0, 1]), 14.0,
+                               7.0, sin20, 20.0).any()
+    broken = ends.copy()
+    broken[3] = np.nan
+    assert not junction_growth(broken, outward, centers, directions, np.array([0, 1]), 14.0, 7.0, sin20, 20.0).any()
 
-    # chains 0 and 1 on the line y = 0 with a gap, chain 2 parallel 2 px beside chain 1
-    center = np.array([[0.0, 0.0], [20.0, 0.0], [20.0, 2.0]])
-    direction = np.tile([1.0, 0.0], (3, 1))
-    normal = np.tile([0.0, 1.0], (3, 1))
-    ends = np.concatenate([center - 5 * direction, center + 5 * direction])   # low ends 0-2, high ends 3-5
-    pairs = np.array([[3, 1], [3, 2], [0, 3]], np.int64)     # 0's high end with 1's, 2's low end; 0 with itself
-    assert collinear_pairs(pairs, ends, center, direction, normal, np.cos(np.radians(2.0)), 1.0).tolist() == [
-        True, False, False]
+    # chains 0 and 1 on the line y = 0 with a gap of 4 px, chain 2 parallel 2 px beside chain 1,
+    # chain 3 on the line but turned 5 degrees, chain 4 on the line 30 px further
+    center = np.array([[0.0, 0.0], [14.0, 0.0], [14.0, 2.0], [-14.0, 0.0], [44.0, 0.0]])
+    direction = np.tile([1.0, 0.0], (5, 1))
+    direction[3] = [np.cos(np.radians(5)), np.sin(np.radians(5))]
+    normal = np.column_stack([-direction[:, 1], direction[:, 0]])
+    ends = np.concatenate([center - 5 * direction, center + 5 * direction])
+    links = collinear_links(ends, center, direction, normal, 14.0, 2.0, np.cos(np.radians(2.0)), 1.0)
+    assert {tuple(sorted(link)) for link in links.tolist()} == {(0, 1)}      # a link once per pair of ends
