@@ -74,6 +74,8 @@ def _patches(img: np.ndarray, top: np.ndarray, left: np.ndarray, rows: int, colu
     repeated beyond the image (as clipping the indices would): one strided gather of a padded
     image's sliding windows instead of fancy indexing with (M, rows, columns) index arrays."""
     height, width = img.shape
+    if len(top) == 0:
+        return np.zeros((0, rows, columns), img.dtype)
     pad_top, pad_left = max(0, -int(top.min())), max(0, -int(left.min()))
     pad_bottom = max(0, int(top.max()) + rows - height)
     pad_right = max(0, int(left.max()) + columns - width)
@@ -92,6 +94,8 @@ def _block_match(left_img: np.ndarray, right_img: np.ndarray, ends: np.ndarray, 
     column = np.rint(ends[:, 0]).astype(np.int64)
     row = np.rint(ends[:, 1]).astype(np.int64)
     h = 2 * w + 1
+    # integer grey levels: the window products and their sums (h * h * 255^2, under 2^24 for
+    # windows up to 15 x 15) are integers, exact in float32 whatever the order of summation
     window = _patches(left_img, row - w, column - w, h, h).astype(np.float32)                 # (M, h, h)
     strip = _patches(right_img, row - w, column - d_hi - w, h, d_hi - d_lo + h).astype(np.float32)   # (M, h, D + 2w)
     shifts = strip.shape[2] - h + 1

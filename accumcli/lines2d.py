@@ -500,21 +500,24 @@ def refine_on_gradient(segments: Segments2D, magnitude: np.ndarray, profiles: in
                                      for f in Segments2D.__dataclass_fields__)))
 
 
+JUNCTION_MIN_DEG = 20.0     # lines closer in direction than this do not meet at a corner
+
+
 def _complete_junctions(t_lo, t_hi, centers, directions, line, params: LineParams):
     """Extend runs whose ends meet another line's run end at a corner.
 
     Near a junction the gradient belongs to two edges, so Canny and the votes
-    lose the last pixels of each. Where the ends of two runs on different,
-    clearly non-parallel lines lie within ``junction_radius_px`` of the lines'
+    lose the last pixels of each. Where the ends of two runs on different lines, more than
+    ``JUNCTION_MIN_DEG`` apart in direction, lie within ``junction_radius_px`` of the lines'
     intersection, both runs are extended to it. Returns new (t_lo, t_hi).
     """
     radius = params.junction_radius_px
     ends = np.concatenate([centers + t_lo[:, None] * directions, centers + t_hi[:, None] * directions])
     n = len(t_lo)
     outward = np.concatenate([-directions, directions])
-    grow = junction_growth(ends, outward, np.ascontiguousarray(centers, np.float64),
-                           np.ascontiguousarray(directions, np.float64), np.ascontiguousarray(line, np.int64),
-                           float(2 * radius), float(radius), float(np.sin(np.radians(20))), 20.0)
+    grow = junction_growth(ends.astype(np.float64), outward.astype(np.float64), centers.astype(np.float64),
+                           directions.astype(np.float64), line.astype(np.int64), float(2 * radius), float(radius),
+                           float(np.sin(np.radians(JUNCTION_MIN_DEG))), JUNCTION_MIN_DEG)
     return t_lo - grow[:n], t_hi + grow[n:]
 
 

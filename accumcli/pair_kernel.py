@@ -24,8 +24,8 @@ from .jit import kernel
 @kernel
 def _binned(ends, direction, bins, reach):  # pragma: no cover
     """Ends (2K, 2) px (the K lines' low ends, then their high ends; ``direction`` (K, 2) of each
-    line) binned by the line's direction (``bins`` over the half turn) and by position (cells at
-    least ``reach`` wide, wider where that would make far more cells than ends). Returns (usable
+    line, unit vectors) binned by the line's direction (``bins`` over the half turn) and by
+    position (cells at least ``reach`` wide, wider where that would make far more cells than ends). Returns (usable
     (2K,) bool: finite end and direction, key (2K, 3) int64 (bin, row, column), start (R C B + 1,)
     of each cell-and-bin's run in ``order`` (2K,), the bins of a cell one after the other, rows,
     columns)."""
@@ -39,9 +39,11 @@ def _binned(ends, direction, bins, reach):  # pragma: no cover
                      and np.isfinite(direction[c, 1]))
         if usable[e]:
             x0, y0, x1, y1 = min(x0, ends[e, 0]), min(y0, ends[e, 1]), max(x1, ends[e, 0]), max(y1, ends[e, 1])
-    size = reach
+    # a hair over reach: rounding in (x - x0) // size cannot put two ends within reach two cells apart
+    size = max(reach, 1e-6) * (1 + 1e-9)
     if usable.any():
-        while bins * ((x1 - x0) // size + 1) * ((y1 - y0) // size + 1) > 64 * m + 100_000:
+        while (bins * ((x1 - x0) // size + 1) * ((y1 - y0) // size + 1) > 4 * m + 100_000
+               and (x1 - x0 >= size or y1 - y0 >= size)):
             size *= 2
     key = np.zeros((m, 3), np.int64)
     for e in range(m):
@@ -75,7 +77,8 @@ def junction_growth(ends, outward, centers, directions, line, reach, radius, min
     pair of ends within ``reach`` px of runs on different lines (``line`` (N,)) whose directions
     (``directions`` (N, 2), through ``centers`` (N, 2)) cross at more than ``min_sin`` (the sine of
     ``parallel_deg``), both grow to the lines' intersection when it lies at most ``radius`` px
-    beyond each end and less than 1 px behind it; an end keeps the largest growth."""
+    beyond each end and at most 1 px behind it; an end keeps the largest growth. Directions are unit
+    vectors; ``min_sin`` is passed as numpy computes it (the comparison is then numpy's own)."""
     n = len(line)
     grow = np.zeros(2 * n)
     if n == 0:
@@ -127,7 +130,7 @@ def junction_growth(ends, outward, centers, directions, line, reach, radius, min
 @kernel
 def collinear_links(ends, center, direction, normal, reach_px, max_deg, min_cos, max_offset_px):  # pragma: no cover
     """(L, 2) int64 pairs of chains (``ends`` (2K, 2) px: the K chains' low ends, then their high
-    ends; lines through ``center`` (K, 2) along ``direction`` (K, 2), ``normal`` (K, 2)) with ends
+    ends; lines through ``center`` (K, 2) along ``direction`` (K, 2), unit vectors, ``normal`` (K, 2)) with ends
     within ``reach_px`` of each other, directions within ``max_deg`` (|cos| at least ``min_cos``, its
     cosine as numpy computes it) and each end within ``max_offset_px`` of the other chain's line.
     Only ends in neighbouring direction bins (at least 1.01 ``max_deg`` wide, around the half turn)
@@ -137,7 +140,7 @@ def collinear_links(ends, center, direction, normal, reach_px, max_deg, min_cos,
     links = np.empty((0, 2), np.int64)
     if m < 2:
         return links
-    bins = max(1, int(np.pi / (np.radians(max_deg) * 1.01)))
+    bins = max(1, min(100_000, int(np.pi / (max(np.radians(max_deg), 1e-9) * 1.01))))
     usable, key, start, order, rows, columns = _binned(ends, direction, bins, reach_px)
     r2 = reach_px * reach_px
     lowest = -1 if bins >= 3 else 0          # neighbouring bins, each once (-1 and +1 are one bin of two)

@@ -290,32 +290,105 @@ def test_pair_kernels_grow_runs_to_their_corner_and_join_collinear_chains_only()
     from accumcli.pair_kernel import collinear_links, junction_growth
 
     sin20 = np.sin(np.radians(20))
-    # two runs: along x ending at x = 7 and along y ending at y = 6; the lines meet at (10, 10)
-    centers = np.array([[0.0, 10.0], [10.0, 0.0]])
-    directions = np.array([[1.0, 0.0], [0.0, 1.0]])
-    t_lo, t_hi = np.array([-5.0, -5.0]), np.array([7.0, 6.0])
-    ends = np.concatenate([centers + t_lo[:, None] * directions, centers + t_hi[:, None] * directions])
-    outward = np.concatenate([-directions, directions])
-    grow = junction_growth(ends, outward, centers, directions, np.array([0, 1]), 14.0, 7.0, sin20, 20.0)
-    assert np.allclose(grow, [0.0, 0.0, 3.0, 4.0])
-    # the same runs on one line, too far from the corner (radius 3) or out of reach do not grow
-    assert not junction_growth(ends, outward, centers, directions, np.array([0, 0]), 14.0, 7.0, sin20, 20.0).any()
-    assert not junction_growth(ends, outward, centers, directions, np.array([0, 1]), 14.0, 3.0, sin20, 20.0).any()
-    assert not junction_growth(ends, outward, centers, directions, np.array([0, 1]), 2.0, 7.0, sin20, 20.0).any()
-    # runs 10 degrees apart do not meet; a non-finite end meets nothing
-    tilted = np.array([[1.0, 0.0], [np.cos(np.radians(10)), np.sin(np.radians(10))]])
-    assert not junction_growth(ends, np.concatenate([-tilted, tilted]), centers, tilted, np.array([0, 1]), 14.0,
-                               7.0, sin20, 20.0).any()
-    broken = ends.copy()
-    broken[3] = np.nan
-    assert not junction_growth(broken, outward, centers, directions, np.array([0, 1]), 14.0, 7.0, sin20, 20.0).any()
 
-    # chains 0 and 1 on the line y = 0 with a gap of 4 px, chain 2 parallel 2 px beside chain 1,
-    # chain 3 on the line but turned 5 degrees, chain 4 on the line 30 px further
-    center = np.array([[0.0, 0.0], [14.0, 0.0], [14.0, 2.0], [-14.0, 0.0], [44.0, 0.0]])
-    direction = np.tile([1.0, 0.0], (5, 1))
-    direction[3] = [np.cos(np.radians(5)), np.sin(np.radians(5))]
-    normal = np.column_stack([-direction[:, 1], direction[:, 0]])
-    ends = np.concatenate([center - 5 * direction, center + 5 * direction])
-    links = collinear_links(ends, center, direction, normal, 14.0, 2.0, np.cos(np.radians(2.0)), 1.0)
-    assert {tuple(sorted(link)) for link in links.tolist()} == {(0, 1)}      # a link once per pair of ends
+    def grow_of(degrees, line=(0, 1), reach=14.0, radius=7.0, nan_end=None):
+        """Growth of a run along x ending at x = 7 and one at ``degrees`` to it ending 6 px before
+        their lines' crossing at (10, 10)."""
+        a = np.radians(degrees)
+        directions = np.array([[1.0, 0.0], [np.cos(a), np.sin(a)]])
+        centers = np.array([[0.0, 10.0], [10.0, 10.0]]) - np.array([[0.0, 0.0], 11.0 * directions[1]])
+        t_lo, t_hi = np.array([-5.0, -5.0]), np.array([7.0, 5.0])
+        ends = np.concatenate([centers + t_lo[:, None] * directions, centers + t_hi[:, None] * directions])
+        if nan_end is not None:
+            ends[nan_end] = np.nan
+        return junction_growth(ends, np.concatenate([-directions, directions]), centers, directions,
+                               np.array(line), reach, radius, sin20, 20.0)
+
+    assert np.allclose(grow_of(90.0), [0.0, 0.0, 3.0, 6.0])
+    assert np.allclose(grow_of(30.0), [0.0, 0.0, 3.0, 6.0])         # another direction bin
+    # 19 degrees (a neighbouring bin: the sine test rejects it), one line, a corner beyond the radius
+    # or the ends out of reach, a non-finite end: no growth
+    for rejected in (grow_of(19.0), grow_of(90.0, line=(0, 0)), grow_of(90.0, radius=3.0),
+                     grow_of(90.0, reach=2.0), grow_of(90.0, nan_end=3)):
+        assert not rejected.any()
+
+    def links_of(a_deg, b_deg, offset=0.0):
+        """Links between a chain 20 px long along ``a_deg`` ending at the origin and one along
+        ``b_deg`` starting 6 px further, ``offset`` px beside the first one's line."""
+        d = np.radians([a_deg, b_deg])
+        direction = np.column_stack([np.cos(d), np.sin(d)])
+        center = np.array([-10.0 * direction[0], 6.0 * direction[0] + [0.0, offset] + 10.0 * direction[1]])
+        normal = np.column_stack([-direction[:, 1], direction[:, 0]])
+        ends = np.concatenate([center - 10 * direction, center + 10 * direction])
+        return np.sort(collinear_links(ends, center, direction, normal, 14.0, 2.0, np.cos(np.radians(2.0)), 1.0))
+
+    # one pair of ends within reach (0's high end, 1's low end): one link, also across the half turn
+    assert links_of(0.0, 0.0).tolist() == [[0, 1]]
+    assert links_of(1.0, 2.5).tolist() == [[0, 1]]              # 1.5 degrees apart, neighbouring bins
+    assert links_of(179.5, 180.5).tolist() == [[0, 1]]          # 179.5 and 0.5 modulo 180: bins at both ends
+    assert len(links_of(0.5, 3.0)) == 0                         # 2.5 degrees: the cosine test rejects it
+    assert len(links_of(0.0, 0.0, offset=2.0)) == 0             # 2 px beside the line
+
+
+def test_pair_kernels_agree_with_a_kd_tree_and_numpy_on_random_ends():
+    """The kernels against the KD-tree and numpy version they replaced (same bits, same links)."""
+    from scipy.sparse.csgraph import connected_components
+    from scipy.sparse import csr_matrix
+    from scipy.spatial import cKDTree
+    from accumcli.pair_kernel import collinear_links, junction_growth
+
+    rng = np.random.default_rng(3)
+    for trial in range(40):
+        n = int(rng.integers(2, 1500))
+        centers = rng.uniform(0, rng.choice([60, 640]), (n, 2))
+        angle = rng.integers(0, 360, n) * np.pi / 180 if trial % 2 else rng.uniform(0, 2 * np.pi, n)
+        directions = np.column_stack([np.cos(angle), np.sin(angle)])
+        t_lo, t_hi = -rng.uniform(0, 20, n), rng.uniform(0, 20, n)
+        line = rng.integers(0, max(1, n // 2), n)
+        ends = np.concatenate([centers + t_lo[:, None] * directions, centers + t_hi[:, None] * directions])
+        outward = np.concatenate([-directions, directions])
+        pairs = cKDTree(ends).query_pairs(14.0, output_type="ndarray")
+        p, q = pairs[:, 0], pairs[:, 1]
+        rp, rq = p % n, q % n
+        d1, d2 = directions[rp], directions[rq]
+        cross = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+        ok = (line[rp] != line[rq]) & (np.abs(cross) > np.sin(np.radians(20)))
+        p, q, rp, rq, d1, d2, cross = p[ok], q[ok], rp[ok], rq[ok], d1[ok], d2[ok], cross[ok]
+        diff = centers[rq] - centers[rp]
+        meet = centers[rp] + ((diff[:, 0] * d2[:, 1] - diff[:, 1] * d2[:, 0]) / cross)[:, None] * d1
+        grow_p, grow_q = (np.sum((meet - ends[e]) * outward[e], axis=1) for e in (p, q))
+        ok = (grow_p >= -1.0) & (grow_p <= 7.0) & (grow_q >= -1.0) & (grow_q <= 7.0)
+        expected = np.zeros(2 * n)
+        np.maximum.at(expected, np.concatenate([p[ok], q[ok]]), np.concatenate([grow_p[ok], grow_q[ok]]))
+        grown = junction_growth(ends, outward, centers, directions, line, 14.0, 7.0, np.sin(np.radians(20)), 20.0)
+        assert np.array_equal(grown, expected), trial
+
+        # near-collinear chains: the same components
+        angle = np.where(rng.random(n) < 0.5, 0.0, np.pi / 2) + rng.normal(0, 0.02, n)
+        direction = np.column_stack([np.cos(angle), np.sin(angle)])
+        center = np.round(rng.uniform(0, 640, (n, 2)) / 3) * 3
+        normal = np.column_stack([-direction[:, 1], direction[:, 0]])
+        ends = np.concatenate([center - 5 * direction, center + 5 * direction])
+        pairs = cKDTree(ends).query_pairs(14.0, output_type="ndarray")
+        i, j = pairs[:, 0] % n, pairs[:, 1] % n
+        ok = (i != j) & (np.abs(np.sum(direction[i] * direction[j], axis=1)) >= np.cos(np.radians(2.0)))
+        ok &= np.abs(np.sum((ends[pairs[:, 1]] - center[i]) * normal[i], axis=1)) <= 1.0
+        ok &= np.abs(np.sum((ends[pairs[:, 0]] - center[j]) * normal[j], axis=1)) <= 1.0
+        links = collinear_links(ends, center, direction, normal, 14.0, 2.0, np.cos(np.radians(2.0)), 1.0)
+        assert sorted(map(tuple, np.sort(links, axis=1).tolist())) == sorted(
+            map(tuple, np.sort(np.column_stack([i[ok], j[ok]]), axis=1).tolist())), trial
+        components = [connected_components(csr_matrix((np.ones(len(a)), (a[:, 0], a[:, 1])), shape=(n, n)),
+                                           directed=False)[1] for a in (links, np.column_stack([i[ok], j[ok]]))]
+        assert np.array_equal(*components)
+
+
+def test_pair_kernels_end_on_degenerate_parameters():
+    from accumcli.pair_kernel import collinear_links, junction_growth
+
+    c = np.array([[0.0, 10.0], [10.0, 0.0]])
+    d = np.array([[1.0, 0.0], [0.0, 1.0]])
+    ends, normal = np.concatenate([c - 5 * d, c + 7 * d]), np.column_stack([-d[:, 1], d[:, 0]])
+    assert len(collinear_links(ends, c, d, normal, 14.0, 0.001, np.cos(np.radians(0.001)), 1.0)) == 0
+    assert len(collinear_links(ends, c, d, normal, 14.0, 0.0, 1.0, 1.0)) == 0
+    assert len(collinear_links(ends, c, d, normal, 0.0, 2.0, np.cos(np.radians(2.0)), 1.0)) == 0
+    assert not junction_growth(ends, np.concatenate([-d, d]), c, d, np.array([0, 1]), 0.0, 0.0, 0.34, 20.0).any()
