@@ -155,3 +155,27 @@ def straight_chain_labels(xy, mag, pixel, links, max_residual_px, rounds, min_le
         if not any_bent or left == 0:
             break
     return labels
+
+
+@kernel
+def neighbour_links(pixel, g, mag, height, width, cos_max):  # pragma: no cover
+    """(E, 2) int64 index pairs (i, j) of 8-neighbouring points (``pixel`` (M, 2) int64 (row,
+    column) in an image of ``height`` x ``width``) whose unit gradients (``g`` (M, 2) / ``mag`` (M,))
+    agree (dot at least ``cos_max``), each pair once: for the neighbour offsets right, down-left,
+    down, down-right in turn, the points in index order (the order of ``edge_chains.chain_links``'
+    numpy version, which the chain labels depend on through the links' order)."""
+    m = len(mag)
+    index = np.full((height + 2, width + 2), -1, np.int32)     # padded: border neighbours are -1
+    for i in range(m):
+        index[pixel[i, 0] + 1, pixel[i, 1] + 1] = i
+    links = np.empty((4 * m, 2), np.int64)
+    found = 0
+    for dr, dc in ((0, 1), (1, -1), (1, 0), (1, 1)):
+        for i in range(m):
+            j = index[pixel[i, 0] + 1 + dr, pixel[i, 1] + 1 + dc]
+            if j < 0:
+                continue
+            if (g[i, 0] / mag[i]) * (g[j, 0] / mag[j]) + (g[i, 1] / mag[i]) * (g[j, 1] / mag[j]) >= cos_max:
+                links[found, 0], links[found, 1] = i, j
+                found += 1
+    return links[:found].copy()

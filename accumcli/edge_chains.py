@@ -38,7 +38,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
-from .chain_kernel import straight_chain_labels
+from .chain_kernel import neighbour_links, straight_chain_labels
 from .grouping import group_range
 from .pair_kernel import collinear_links
 from .lines2d import (EdgePoints, Gradients, LineParams, Segments2D, StageTimes, _canonical, _weighted_line_fit,
@@ -53,22 +53,12 @@ CHAIN_SPLITS = 8              # rounds of cutting (a loop needs two to open and 
 
 def chain_links(points: EdgePoints, shape: tuple[int, int]) -> np.ndarray:
     """(E, 2) index pairs of 8-neighbouring edge points whose gradients agree (same polarity,
-    directions within ``CHAIN_ANGLE_DEG``), each pair once."""
-    h, w = shape
-    m = len(points.mag)
-    index = np.full((h + 2, w + 2), -1, np.int64)   # padded: neighbours of border pixels are -1
-    rows, cols = points.pixel[:, 0] + 1, points.pixel[:, 1] + 1
-    index[rows, cols] = np.arange(m)
-    unit = points.g / points.mag[:, None]
-    cos_max = np.cos(np.radians(CHAIN_ANGLE_DEG))
-    links = [np.zeros((0, 2), np.int64)]
-    for dr, dc in ((0, 1), (1, -1), (1, 0), (1, 1)):
-        j = index[rows + dr, cols + dc]
-        i = np.nonzero(j >= 0)[0]
-        j = j[i]
-        agree = np.sum(unit[i] * unit[j], axis=1) >= cos_max
-        links.append(np.column_stack([i[agree], j[agree]]))
-    return np.concatenate(links)
+    directions within ``CHAIN_ANGLE_DEG``), each pair once. Compiled (``chain_kernel.neighbour_links``):
+    the numpy version filled a padded index image and gathered four neighbour arrays, 1.5 ms per
+    640x480 image of the 0.1 the loop takes."""
+    return neighbour_links(np.ascontiguousarray(points.pixel, np.int64), np.ascontiguousarray(points.g, np.float64),
+                           np.ascontiguousarray(points.mag, np.float64), int(shape[0]), int(shape[1]),
+                           float(np.cos(np.radians(CHAIN_ANGLE_DEG))))
 
 
 def straight_chains(points: EdgePoints, shape: tuple[int, int], max_residual_px: float = CHAIN_MAX_RESIDUAL_PX,

@@ -392,3 +392,15 @@ def test_pair_kernels_end_on_degenerate_parameters():
     assert len(collinear_links(ends, c, d, normal, 14.0, 0.0, 1.0, 1.0)) == 0
     assert len(collinear_links(ends, c, d, normal, 0.0, 2.0, np.cos(np.radians(2.0)), 1.0)) == 0
     assert not junction_growth(ends, np.concatenate([-d, d]), c, d, np.array([0, 1]), 0.0, 0.0, 0.34, 20.0).any()
+
+
+def test_neighbour_links_join_8_neighbours_whose_gradients_agree_each_pair_once():
+    from accumcli.chain_kernel import neighbour_links
+
+    # (row, column): a run along row 2, its right end at the image border, one pixel below-left of
+    # the run's start, one with the opposite gradient, one far away
+    pixel = np.array([[2, 7], [2, 8], [2, 9], [3, 6], [1, 8], [5, 0]], np.int64)
+    g = np.array([[0.0, 9.0], [0.0, 9.0], [0.0, 9.0], [2.0, 9.0], [0.0, -9.0], [0.0, 9.0]])
+    links = neighbour_links(pixel, g, np.hypot(g[:, 0], g[:, 1]), 10, 10, np.cos(np.radians(20.0)))
+    # right neighbours first (0-1, 1-2), then down-left (0-3); 4 (opposite polarity) and 5 (alone) join nothing
+    assert links.tolist() == [[0, 1], [1, 2], [0, 3]]
