@@ -45,6 +45,7 @@ import cv2
 import numpy as np
 
 from .errors import InputError
+from .chain_kernel import line_order
 from .pair_kernel import junction_growth
 
 
@@ -397,7 +398,7 @@ def local_segments(points: EdgePoints, labels: np.ndarray, params: LineParams,
     polarity = np.where(np.sum(g * line_normal[labels], axis=1) >= 0, 1, -1)
     keep = np.abs(across) <= params.max_line_distance_px
     xy, mag, labels, t, polarity = xy[keep], mag[keep], labels[keep], t[keep], polarity[keep]
-    order = np.lexsort((t, polarity, labels))
+    order = line_order(labels.astype(np.int64), polarity.astype(np.int64), t.astype(np.float64))   # = np.lexsort((t, polarity, labels))
     xy, mag, labels, t, polarity = xy[order], mag[order], labels[order], t[order], polarity[order]
     # runs of supporting pixels
     L = params.segment_length_px

@@ -404,3 +404,14 @@ def test_neighbour_links_join_8_neighbours_whose_gradients_agree_each_pair_once(
     links = neighbour_links(pixel, g, np.hypot(g[:, 0], g[:, 1]), 10, 10, np.cos(np.radians(20.0)))
     # right neighbours first (0-1, 1-2), then down-left (0-3); 4 (opposite polarity) and 5 (alone) join nothing
     assert links.tolist() == [[0, 1], [1, 2], [0, 3]]
+
+
+def test_line_order_is_numpys_lexsort_with_its_ties():
+    from accumcli.chain_kernel import line_order
+
+    rng = np.random.default_rng(5)
+    for n in (0, 1, 7, 3000):
+        labels = rng.integers(0, max(1, n // 20), n)
+        polarity = rng.choice([-1, 1], n)
+        t = np.round(rng.normal(0, 30, n))               # whole numbers: many ties within a line
+        assert np.array_equal(line_order(labels, polarity, t), np.lexsort((t, polarity, labels)))
