@@ -210,7 +210,7 @@ def expected_weights(model: Segments, T_camera_object: np.ndarray, ramp_deg: flo
     On dev_steps_track at the true pose, 30 to 42 % of the samples were unseen there (truth); weighting
     them down took the refinement from the true pose from 0.36 deg median / 2.7 deg max error (50 of 60
     frames verified) to 0.22 / 1.2 (58 of 60), and the tracking scoreboard from 2 falsely tracked
-    frames to none."""
+    frames to none (a ramp of 10 or 20 deg leaves three: the zero is fragile, README)."""
     beyond = _beyond_cone_deg(model, T_camera_object)
     if beyond is None or ramp_deg <= 0:
         return np.ones(len(model))
@@ -354,8 +354,8 @@ def _refine_from(best: PoseEstimate, accepted: Segments, frame: StereoFrame, par
 def _samples_in_view(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, params: TrackParams,
                      per_segment: int | None = None):
     """Sample points (S, 3) and directions (S, 3), object frame, of the accepted segments in view at
-    ``T`` (``per_segment`` each, default ``samples_per_segment``) and their coverage weights (S,)
-    (``expected_weights``), or None when fewer than 3 segments are."""
+    ``T`` (``per_segment`` each, default ``samples_per_segment``) and their weights (S,) in the fit
+    and the coverage (``expected_weights``), or None when fewer than 3 segments are."""
     keep = visible(accepted, T, intr, params.aspect_margin_deg)
     if keep.sum() < 3:
         return None
