@@ -182,26 +182,36 @@ def neighbour_links(pixel, g, mag, height, width, cos_max):  # pragma: no cover
 
 
 @kernel
+def grouped_order(keys, groups):  # pragma: no cover
+    """Indices (M,) grouped by ``keys`` (M,) int64 in 0..``groups``-1, a stable counting sort (a
+    negative key leaves its index out): (start (groups + 1,) of each group's run in order, order)."""
+    start = np.zeros(groups + 1, np.int64)
+    for i in range(len(keys)):
+        if keys[i] >= 0:
+            start[keys[i] + 1] += 1
+    for k in range(groups):
+        start[k + 1] += start[k]
+    fill = start[:-1].copy()
+    order = np.empty(start[groups], np.int64)
+    for i in range(len(keys)):
+        k = keys[i]
+        if k >= 0:
+            order[fill[k]] = i
+            fill[k] += 1
+    return start, order
+
+
+@kernel
 def line_order(labels, polarity, t):  # pragma: no cover
     """(M,) the order of ``np.lexsort((t, polarity, labels))`` (``labels`` (M,) int64 >= 0, ``polarity``
     (M,) -1 or 1, ``t`` (M,) float64): a stable counting sort by (label, polarity), then a stable
     merge sort by ``t`` within each group. Why: the lexsort's three stable passes over every edge point
     of an image took 1.7 ms of ``lines2d.local_segments``' 3.8; the groups are small."""
-    m = len(t)
-    order = np.empty(m, np.int64)
-    if m == 0:
-        return order
+    if len(t) == 0:
+        return np.empty(0, np.int64)
+    keys = 2 * labels + (polarity > 0)
     groups = 2 * (labels.max() + 1)
-    start = np.zeros(groups + 1, np.int64)
-    for i in range(m):
-        start[2 * labels[i] + (1 if polarity[i] > 0 else 0) + 1] += 1
-    for k in range(groups):
-        start[k + 1] += start[k]
-    fill = start[:-1].copy()
-    for i in range(m):
-        k = 2 * labels[i] + (1 if polarity[i] > 0 else 0)
-        order[fill[k]] = i
-        fill[k] += 1
+    start, order = grouped_order(keys, groups)
     for k in range(groups):
         a, b = start[k], start[k + 1]
         if b - a > 1:

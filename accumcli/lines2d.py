@@ -516,8 +516,9 @@ def _complete_junctions(t_lo, t_hi, centers, directions, line, params: LineParam
     ends = np.concatenate([centers + t_lo[:, None] * directions, centers + t_hi[:, None] * directions])
     n = len(t_lo)
     outward = np.concatenate([-directions, directions])
-    grow = junction_growth(ends.astype(np.float64), outward.astype(np.float64), centers.astype(np.float64),
-                           directions.astype(np.float64), line.astype(np.int64), float(2 * radius), float(radius),
+    contiguous = np.ascontiguousarray
+    grow = junction_growth(contiguous(ends, np.float64), contiguous(outward, np.float64), contiguous(centers, np.float64),
+                           contiguous(directions, np.float64), contiguous(line, np.int64), float(2 * radius), float(radius),
                            float(np.sin(np.radians(JUNCTION_MIN_DEG))), JUNCTION_MIN_DEG)
     return t_lo - grow[:n], t_hi + grow[n:]
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .chain_kernel import grouped_order
 from .jit import kernel
 
 
@@ -25,10 +26,10 @@ from .jit import kernel
 def _binned(ends, direction, bins, reach):  # pragma: no cover
     """Ends (2K, 2) px (the K lines' low ends, then their high ends; ``direction`` (K, 2) of each
     line, unit vectors) binned by the line's direction (``bins`` over the half turn) and by
-    position (cells at least ``reach`` wide, wider where that would make far more cells than ends). Returns (usable
-    (2K,) bool: finite end and direction, key (2K, 3) int64 (bin, row, column), start (R C B + 1,)
-    of each cell-and-bin's run in ``order`` (2K,), the bins of a cell one after the other, rows,
-    columns)."""
+    position (cells at least ``reach`` wide, wider where that would make far more cells than
+    ends). Returns (usable (2K,) bool: finite end and direction, key (2K, 3) int64 (bin, row,
+    column), start (R C B + 1,) of each cell-and-bin's run in ``order`` (the usable ends), the bins
+    of a cell one after the other, rows, columns)."""
     k_lines = len(direction)
     m = len(ends)
     usable = np.zeros(m, np.bool_)
@@ -54,20 +55,25 @@ def _binned(ends, direction, bins, reach):  # pragma: no cover
             key[e, 1] = int((ends[e, 1] - y0) // size)
             key[e, 2] = int((ends[e, 0] - x0) // size)
     rows, columns = key[:, 1].max() + 1, key[:, 2].max() + 1
-    start = np.zeros(bins * rows * columns + 1, np.int64)
-    for e in range(m):
-        if usable[e]:
-            start[(key[e, 1] * columns + key[e, 2]) * bins + key[e, 0] + 1] += 1
-    for c in range(len(start) - 1):
-        start[c + 1] += start[c]
-    fill = start[:-1].copy()
-    order = np.empty(m, np.int64)
-    for e in range(m):
-        if usable[e]:
-            c = (key[e, 1] * columns + key[e, 2]) * bins + key[e, 0]
-            order[fill[c]] = e
-            fill[c] += 1
+    cell = np.where(usable, (key[:, 1] * columns + key[:, 2]) * bins + key[:, 0], -1)
+    start, order = grouped_order(cell, bins * rows * columns)
     return usable, key, start, order, rows, columns
+
+
+@kernel
+def _neighbour_cells(key, p, rows, columns, cells):  # pragma: no cover
+    """The cells (row * columns + column) of end ``p``'s 3 x 3 neighbourhood inside the grid of
+    ``_binned``, written to ``cells`` (9,); returns how many."""
+    count = 0
+    for dy in range(-1, 2):
+        row = key[p, 1] + dy
+        if 0 <= row < rows:
+            for dx in range(-1, 2):
+                column = key[p, 2] + dx
+                if 0 <= column < columns:
+                    cells[count] = row * columns + column
+                    count += 1
+    return count
 
 
 @kernel
@@ -86,101 +92,83 @@ def junction_growth(ends, outward, centers, directions, line, reach, radius, min
     bins = int(np.ceil(180.0 / (0.95 * parallel_deg)))     # one bin is too narrow for two lines to meet
     usable, key, start, order, rows, columns = _binned(ends, directions, bins, reach)
     r2 = reach * reach
+    cells = np.empty(9, np.int64)
     for p in range(2 * n):
         if not usable[p]:
             continue
         rp = p - n if p >= n else p
-        for dy in range(-1, 2):
-            row = key[p, 1] + dy
-            if row < 0 or row >= rows:
-                continue
-            for dx in range(-1, 2):
-                column = key[p, 2] + dx
-                if column < 0 or column >= columns:
-                    continue
-                base = (row * columns + column) * bins
-                own = base + key[p, 0]
-                for part in range(2):        # the cell's other bins: before and after p's own
-                    first, last = (start[base], start[own]) if part == 0 else (start[own + 1], start[base + bins])
-                    for k in range(first, last):
-                        q = order[k]
-                        if q <= p:
-                            continue
-                        ex, ey = ends[q, 0] - ends[p, 0], ends[q, 1] - ends[p, 1]
-                        if ex * ex + ey * ey > r2:
-                            continue
-                        rq = q - n if q >= n else q
-                        if line[rp] == line[rq]:
-                            continue
-                        d1x, d1y, d2x, d2y = directions[rp, 0], directions[rp, 1], directions[rq, 0], directions[rq, 1]
-                        cross = d1x * d2y - d1y * d2x
-                        if not abs(cross) > min_sin:
-                            continue
-                        diffx, diffy = centers[rq, 0] - centers[rp, 0], centers[rq, 1] - centers[rp, 1]
-                        a = (diffx * d2y - diffy * d2x) / cross
-                        meetx, meety = centers[rp, 0] + a * d1x, centers[rp, 1] + a * d1y
-                        grow_p = (meetx - ends[p, 0]) * outward[p, 0] + (meety - ends[p, 1]) * outward[p, 1]
-                        grow_q = (meetx - ends[q, 0]) * outward[q, 0] + (meety - ends[q, 1]) * outward[q, 1]
-                        if grow_p >= -1.0 and grow_p <= radius and grow_q >= -1.0 and grow_q <= radius:
-                            grow[p] = max(grow[p], grow_p)
-                            grow[q] = max(grow[q], grow_q)
+        for c in range(_neighbour_cells(key, p, rows, columns, cells)):
+            base = cells[c] * bins
+            own = base + key[p, 0]
+            for part in range(2):        # the cell's other bins: before and after p's own
+                first, last = (start[base], start[own]) if part == 0 else (start[own + 1], start[base + bins])
+                for k in range(first, last):
+                    q = order[k]
+                    ex, ey = ends[q, 0] - ends[p, 0], ends[q, 1] - ends[p, 1]
+                    if q <= p or ex * ex + ey * ey > r2:
+                        continue
+                    rq = q - n if q >= n else q
+                    if line[rp] == line[rq]:
+                        continue
+                    d1x, d1y, d2x, d2y = directions[rp, 0], directions[rp, 1], directions[rq, 0], directions[rq, 1]
+                    cross = d1x * d2y - d1y * d2x
+                    if not abs(cross) > min_sin:
+                        continue
+                    diffx, diffy = centers[rq, 0] - centers[rp, 0], centers[rq, 1] - centers[rp, 1]
+                    a = (diffx * d2y - diffy * d2x) / cross
+                    meetx, meety = centers[rp, 0] + a * d1x, centers[rp, 1] + a * d1y
+                    grow_p = (meetx - ends[p, 0]) * outward[p, 0] + (meety - ends[p, 1]) * outward[p, 1]
+                    grow_q = (meetx - ends[q, 0]) * outward[q, 0] + (meety - ends[q, 1]) * outward[q, 1]
+                    if grow_p >= -1.0 and grow_p <= radius and grow_q >= -1.0 and grow_q <= radius:
+                        grow[p] = max(grow[p], grow_p)
+                        grow[q] = max(grow[q], grow_q)
     return grow
 
 
 @kernel
 def collinear_links(ends, center, direction, normal, reach_px, max_deg, min_cos, max_offset_px):  # pragma: no cover
     """(L, 2) int64 pairs of chains (``ends`` (2K, 2) px: the K chains' low ends, then their high
-    ends; lines through ``center`` (K, 2) along ``direction`` (K, 2), unit vectors, ``normal`` (K, 2)) with ends
-    within ``reach_px`` of each other, directions within ``max_deg`` (|cos| at least ``min_cos``, its
-    cosine as numpy computes it) and each end within ``max_offset_px`` of the other chain's line.
-    Only ends in neighbouring direction bins (at least 1.01 ``max_deg`` wide, around the half turn)
-    are compared."""
+    ends; lines through ``center`` (K, 2) along ``direction`` (K, 2), unit vectors, ``normal`` (K,
+    2)) with ends within ``reach_px`` of each other, directions within ``max_deg`` (|cos| at least
+    ``min_cos``, its cosine as numpy computes it) and each end within ``max_offset_px`` of the other
+    chain's line. Only ends in neighbouring direction bins (at least 1.01 ``max_deg`` wide, around
+    the half turn) are compared."""
     k_chains = len(center)
     m = len(ends)
-    links = np.empty((0, 2), np.int64)
     if m < 2:
-        return links
+        return np.empty((0, 2), np.int64)
     bins = max(1, min(100_000, int(np.pi / (max(np.radians(max_deg), 1e-9) * 1.01))))
     usable, key, start, order, rows, columns = _binned(ends, direction, bins, reach_px)
     r2 = reach_px * reach_px
     lowest = -1 if bins >= 3 else 0          # neighbouring bins, each once (-1 and +1 are one bin of two)
     highest = 2 if bins >= 3 else bins
-    for writing in (False, True):
-        found = 0
-        for p in range(m):
-            if not usable[p]:
-                continue
-            i = p - k_chains if p >= k_chains else p
-            for dy in range(-1, 2):
-                row = key[p, 1] + dy
-                if row < 0 or row >= rows:
-                    continue
-                for dx in range(-1, 2):
-                    column = key[p, 2] + dx
-                    if column < 0 or column >= columns:
+    cells = np.empty(9, np.int64)
+    links = np.empty((max(16, m), 2), np.int64)
+    found = 0
+    for p in range(m):
+        if not usable[p]:
+            continue
+        i = p - k_chains if p >= k_chains else p
+        for c in range(_neighbour_cells(key, p, rows, columns, cells)):
+            for db in range(lowest, highest):
+                b = cells[c] * bins + (key[p, 0] + db) % bins
+                for k in range(start[b], start[b + 1]):
+                    q = order[k]
+                    ex, ey = ends[q, 0] - ends[p, 0], ends[q, 1] - ends[p, 1]
+                    if q <= p or ex * ex + ey * ey > r2:
                         continue
-                    for db in range(lowest, highest):
-                        c = (row * columns + column) * bins + (key[p, 0] + db) % bins
-                        for k in range(start[c], start[c + 1]):
-                            q = order[k]
-                            if q <= p:
-                                continue
-                            ex, ey = ends[q, 0] - ends[p, 0], ends[q, 1] - ends[p, 1]
-                            if ex * ex + ey * ey > r2:
-                                continue
-                            j = q - k_chains if q >= k_chains else q
-                            if i == j or not abs(direction[i, 0] * direction[j, 0]
-                                                 + direction[i, 1] * direction[j, 1]) >= min_cos:
-                                continue
-                            if not abs((ends[q, 0] - center[i, 0]) * normal[i, 0]
-                                       + (ends[q, 1] - center[i, 1]) * normal[i, 1]) <= max_offset_px:
-                                continue
-                            if not abs((ends[p, 0] - center[j, 0]) * normal[j, 0]
-                                       + (ends[p, 1] - center[j, 1]) * normal[j, 1]) <= max_offset_px:
-                                continue
-                            if writing:
-                                links[found, 0], links[found, 1] = i, j
-                            found += 1
-        if not writing:
-            links = np.empty((found, 2), np.int64)
-    return links
+                    j = q - k_chains if q >= k_chains else q
+                    if i == j or not abs(direction[i, 0] * direction[j, 0]
+                                         + direction[i, 1] * direction[j, 1]) >= min_cos:
+                        continue
+                    if not abs((ends[q, 0] - center[i, 0]) * normal[i, 0]
+                               + (ends[q, 1] - center[i, 1]) * normal[i, 1]) <= max_offset_px:
+                        continue
+                    if not abs((ends[p, 0] - center[j, 0]) * normal[j, 0]
+                               + (ends[p, 1] - center[j, 1]) * normal[j, 1]) <= max_offset_px:
+                        continue
+                    if found == len(links):              # full: twice the room
+                        links = np.concatenate((links, np.empty_like(links)))
+                    links[found, 0], links[found, 1] = i, j
+                    found += 1
+    return links[:found].copy()

@@ -182,11 +182,16 @@ def visible(model: Segments, T_camera_object: np.ndarray, intr: StereoIntrinsics
     """(N,) bool: model segments in both images (``visibility.segments_in_both_images``) and (if
     the model has ``view_direction`` and ``view_spread_deg``) seen from within their cone of views
     plus ``margin_deg``."""
+    return _in_view(model, T_camera_object, intr, margin_deg)[0]
+
+
+def _in_view(model: Segments, T_camera_object: np.ndarray, intr: StereoIntrinsics, margin_deg: float):
+    """``visible``'s mask (N,) and ``_beyond_cone_deg`` (N,) (None without cones), computed once."""
     ok = segments_in_both_images(model, T_camera_object, intr)
     beyond = _beyond_cone_deg(model, T_camera_object)
     if beyond is not None:
         ok &= beyond <= margin_deg
-    return ok
+    return ok, beyond
 
 
 def _beyond_cone_deg(model: Segments, T_camera_object: np.ndarray) -> np.ndarray | None:
@@ -211,9 +216,13 @@ def expected_weights(model: Segments, T_camera_object: np.ndarray, ramp_deg: flo
     them down took the refinement from the true pose from 0.36 deg median / 2.7 deg max error (50 of 60
     frames verified) to 0.22 / 1.2 (58 of 60), and the tracking scoreboard from 2 falsely tracked
     frames to none (a ramp of 10 or 20 deg leaves three: the zero is fragile, README)."""
-    beyond = _beyond_cone_deg(model, T_camera_object)
+    return _ramp(_beyond_cone_deg(model, T_camera_object), len(model), ramp_deg)
+
+
+def _ramp(beyond: np.ndarray | None, n: int, ramp_deg: float) -> np.ndarray:
+    """``expected_weights`` (n,) from the degrees beyond the cones (None: no cones)."""
     if beyond is None or ramp_deg <= 0:
-        return np.ones(len(model))
+        return np.ones(n)
     return np.clip(1.0 - beyond / ramp_deg, 0.0, 1.0)
 
 
@@ -356,13 +365,13 @@ def _samples_in_view(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, 
     """Sample points (S, 3) and directions (S, 3), object frame, of the accepted segments in view at
     ``T`` (``per_segment`` each, default ``samples_per_segment``) and their weights (S,) in the fit
     and the coverage (``expected_weights``), or None when fewer than 3 segments are."""
-    keep = visible(accepted, T, intr, params.aspect_margin_deg)
+    keep, beyond = _in_view(accepted, T, intr, params.aspect_margin_deg)
     if keep.sum() < 3:
         return None
-    shown = accepted.select(keep)
     per_segment = per_segment or params.samples_per_segment
-    points, dirs, _ = model_samples(shown, per_segment)
-    return points, dirs, np.repeat(expected_weights(shown, T, params.expect_ramp_deg), per_segment)
+    points, dirs, _ = model_samples(accepted.select(keep), per_segment)
+    weights = _ramp(None if beyond is None else beyond[keep], int(keep.sum()), params.expect_ramp_deg)
+    return points, dirs, np.repeat(weights, per_segment)
 
 
 def _gauss_newton(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, grads, search: float, tukey: float,
