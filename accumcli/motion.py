@@ -41,29 +41,33 @@ class MotionParams:
     """``near_m`` / ``near_deg``: a frame's segment is the object's when its centre is this close to
     the line of a pass-1 accepted segment (and within its extent plus ``near_m``) and its direction
     this close (the pass-1 model is smeared by the noise, a few mm); ``sigma_relative_deg`` /
-    ``sigma_relative_m``: the standard deviation of a verified frame-to-frame correction per axis
-    (measured on random scenes: median 0.2-0.5 deg, 0.2-1 mm); ``gate_sigmas``: a correction further
-    than this many standard deviations of the recorded poses' difference is not believed (a
-    refinement can verify at a wrong local minimum, 6-22 deg or 12-14 mm off on the random scenes);
-    ``span``: each frame is refined against the object segments of the ``span`` frames before it
-    (a second link bridges a failed one, and a wrong one contradicts the others: on seeds 301-306 a
-    span of 2 halved the median shortfall from the exact poses' model, 3 did not help further);
-    ``residual_sigmas``: after the fusion, the correction furthest from the fused poses (in
-    relative sigmas on any axis) is dropped while it is further than this, and the rest fused again
-    (None: never); ``max_std_deg`` / ``max_std_mm``: the frame-to-frame refinement's limits on its
-    standard deviations, twice ``TrackParams``' (one frame's 20-40 object segments determine a pose
-    less than a model does; the gate and the residual test catch the wrong ones: on seeds 301-306
-    the median shortfall 0.032 -> 0.029, the worst 0.099 -> 0.088)."""
+    ``sigma_relative_m``: the least standard deviation per axis of the recorded poses (a floor of
+    ``fuse``'s estimate) and a term of the gate; ``gate_sigmas``: a correction further than this many
+    standard deviations of the recorded poses' difference is not believed (a refinement can verify at
+    a wrong local minimum, 6-22 deg or 12-14 mm off on the random scenes); ``span``: each frame is
+    refined against the object segments of the ``span`` frames before it (a second link bridges a
+    failed one, and a wrong one contradicts the others: on seeds 301-306 a span of 2 halved the median
+    shortfall from the exact poses' model, 3 did not help further); ``residual_chi2``: after the
+    fusion, the link furthest from the fused poses (chi-square of its information) is dropped while
+    above this (6 degrees of freedom, 1 %), and the rest fused again (None: never);
+    ``information_scale``: a link's image information is divided by this (its residuals are
+    correlated along each edge, so the Gauss-Newton figure is too confident: measured on seeds 301-306);
+    ``search_px`` / ``tukey_px``: the refinement's coarse-to-fine levels (the recorded poses are a few
+    pixels off: the tracker's 40 and 24 px levels took it to clutter); ``prior_deg`` / ``prior_mm``: its
+    prior about the recorded pose per axis, about the recorded poses' frame-to-frame error."""
 
     near_m: float = 0.01
     near_deg: float = 12.0
-    sigma_relative_deg: float = 0.3
-    sigma_relative_m: float = 0.001
+    sigma_relative_deg: float = 0.1
+    sigma_relative_m: float = 0.0003
     gate_sigmas: float = 3.0
     span: int = 2
-    residual_sigmas: float | None = 2.0
-    max_std_deg: float = 0.6
-    max_std_mm: float = 2.0
+    residual_chi2: float | None = 16.8
+    information_scale: float = 10.0
+    search_px: tuple = (12.0, 6.0, 3.0)
+    tukey_px: tuple = (6.0, 4.0, 2.5)
+    prior_deg: float = 2.0
+    prior_mm: float = 5.0
 
 
 def object_segments(segments_camera: Segments, T_recorded: np.ndarray, skeleton: Segments,
@@ -98,59 +102,87 @@ def correction(T_recorded: np.ndarray, T_refined: np.ndarray) -> np.ndarray:
     return np.concatenate([Rotation.from_matrix(C[:3, :3]).as_rotvec(), C[:3, 3]])
 
 
-def fuse(corrections: dict[tuple[int, int], np.ndarray], n: int, params: MotionParams) -> np.ndarray:
+def fuse(links: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]], n: int, params: MotionParams) -> np.ndarray:
     """(n, 6) corrections x_k (object frame: rotation vector rad, translation m) of the n recorded
     poses, ``T_k = T_recorded_k exp(x_k)``.
 
-    ``corrections[j, k]`` (j < k, k - j <= ``span``) measures ``x_k - x_j`` (frame j's segments refined
-    on frame k: its pose is ``T_recorded_k exp(c)`` in frame j's gauge; to first order ``c = x_k - x_j``).
-    The recorded poses are unbiased with a standard deviation ``s`` per axis, estimated from the
-    corrections themselves (their median norm, for a 3D normal difference of two poses 1.538 sqrt(2) s;
-    never below the relative sigma ``r``): every axis minimises ``sum x_k^2 / s^2 + sum (x_k - x_j -
-    c_jk)^2 / r^2``, a banded system. A correction beyond ``gate_sigmas`` of ``sqrt(2 s^2 + r^2)``
-    on any axis is dropped, and then, one at a time, the correction furthest from the fused poses
-    while it is more than ``residual_sigmas`` r away on an axis (a wrong correction that other links
-    contradict). Frames linked by corrections share one gauge (their mean error, reduced by the
-    square root of their number); unlinked frames keep their recorded pose."""
+    ``links[j, k] = (c, information)`` (j < k, k - j <= ``span``): frame j's segments refined on frame k
+    measure ``x_k - x_j`` (to first order ``c``), with the (6, 6) information of the images in x's
+    coordinates (``link_information``), divided here by ``information_scale``. The recorded poses
+    are unbiased with a standard deviation ``s`` per axis, estimated from the links along their best
+    seen rotation and translation directions (for the difference of two poses a median |N(0, 2 s^2)|;
+    never below the relative sigma ``r``). All frames together minimise
+    ``sum |x_k|^2 / s^2 + sum (x_k - x_j - c)^T L (x_k - x_j - c)``, one block-banded system: the
+    images decide the directions they see (lateral, in-plane), the recorded poses the rest (depth and
+    out-of-plane rotation of a small object: a link's 1 sigma there is 1-3 mm and about 0.5 deg).
+    A link beyond ``gate_sigmas`` of ``sqrt(2 s^2 + r^2)`` on any axis is dropped, and then, one at a
+    time, the link furthest from the fused poses while its chi-square ``e^T L e`` exceeds
+    ``residual_chi2`` (a wrong link that the others and the recorded poses contradict). Frames linked
+    share one gauge (their mean error, reduced by the square root of their number); unlinked frames
+    keep their recorded pose."""
     r = np.repeat([np.radians(params.sigma_relative_deg), params.sigma_relative_m], 3)
     x = np.zeros((n, 6))
-    if not corrections or n < 2:
+    if not links or n < 2:
         return x
-    c = np.stack(list(corrections.values()))
-    s = np.maximum(np.repeat([np.median(np.linalg.norm(c[:, :3], axis=1)),
-                              np.median(np.linalg.norm(c[:, 3:], axis=1))], 3) / (1.538 * np.sqrt(2)), r)
+    s = np.maximum(np.repeat(_recorded_sigma(links.values()), 3), r)
     gate = params.gate_sigmas * np.sqrt(2 * s ** 2 + r ** 2)
-    used = {jk: v for jk, v in corrections.items() if 0 <= jk[0] < jk[1] < n and np.all(np.abs(v) <= gate)}
+    used = {jk: (c, L / params.information_scale) for jk, (c, L) in links.items()
+            if 0 <= jk[0] < jk[1] < n and np.all(np.abs(c) <= gate)}
     log.info("motion: %d of %d frame-to-frame corrections used; recorded poses' sigma %.2f deg, %.1f mm",
-             len(used), len(corrections), np.degrees(s[0]), s[3] * 1000)
+             len(used), len(links), np.degrees(s[0]), s[3] * 1000)
     while True:
-        x = _solve(used, n, s, r)
-        if not used or params.residual_sigmas is None:
+        x = _solve(used, n, s)
+        if not used or params.residual_chi2 is None:
             return x
-        worst, ratio = max(((jk, np.max(np.abs(x[jk[1]] - x[jk[0]] - v) / r)) for jk, v in used.items()),
-                           key=lambda item: item[1])
-        if ratio <= params.residual_sigmas:
+        chi2 = {jk: float((x[jk[1]] - x[jk[0]] - c) @ L @ (x[jk[1]] - x[jk[0]] - c)) for jk, (c, L) in used.items()}
+        worst = max(chi2, key=chi2.get)
+        if chi2[worst] <= params.residual_chi2:
             return x
         del used[worst]
 
 
-def _solve(used: dict, n: int, s: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """(n, 6) the least-squares corrections of ``fuse`` for the corrections ``used``, per axis."""
-    x = np.zeros((n, 6))
-    band = max([k - j for j, k in used] or [1])
-    for axis in range(6):
-        banded = np.zeros((band + 1, n))          # upper form: banded[band + i - j, j] = H[i, j]
-        banded[band] = 1 / s[axis] ** 2
-        rhs = np.zeros(n)
-        w = 1 / r[axis] ** 2
-        for (j, k), v in used.items():
-            banded[band, k] += w
-            banded[band, j] += w
-            banded[band + j - k, k] -= w
-            rhs[k] += w * v[axis]
-            rhs[j] -= w * v[axis]
-        x[:, axis] = solveh_banded(banded, rhs)
-    return x
+def _recorded_sigma(links) -> np.ndarray:
+    """(2,) the recorded poses' standard deviation per axis (rad, m) from the links (c, information):
+    each link's correction along its best seen rotation and translation direction (the information's
+    top eigenvectors; the others are held by the prior) is the difference of two recorded errors,
+    |N(0, 2 s^2)|, median 0.6745 sqrt(2) s. (Pooling every direction with a tenth of the top
+    eigenvalue or more: seeds 301-306 median shortfall 0.020, worst 0.077, against 0.013, 0.072.)"""
+    along = []
+    for c, L in links:
+        u_rotation, u_translation = (np.linalg.eigh(L[part, part])[1][:, -1] for part in (slice(0, 3), slice(3, 6)))
+        along.append((abs(c[:3] @ u_rotation), abs(c[3:] @ u_translation)))
+    return np.median(np.array(along), axis=0) / (0.6745 * np.sqrt(2))
+
+
+def _solve(used: dict, n: int, s: np.ndarray) -> np.ndarray:
+    """(n, 6) the least-squares corrections of ``fuse`` for the links ``used`` ((c, L) by (j, k)): the
+    normal equations of all frames, block-banded (6 x 6 blocks within the links' span)."""
+    band = 6 * max([k - j for j, k in used] or [1]) + 5
+    banded = np.zeros((band + 1, 6 * n))        # upper form: banded[band + i - j, j] = H[i, j], i <= j
+    banded[band] = np.tile(1 / s ** 2, n)
+    rhs = np.zeros(6 * n)
+    rows, cols = np.triu_indices(6)
+    for (j, k), (c, L) in used.items():
+        Lc = L @ c
+        rhs[6 * k:6 * k + 6] += Lc
+        rhs[6 * j:6 * j + 6] -= Lc
+        for a in (j, k):      # the diagonal blocks, upper triangle
+            banded[band + rows - cols, 6 * a + cols] += L[rows, cols]
+        i, m = np.meshgrid(np.arange(6), np.arange(6), indexing="ij")     # the (j, k) block: -L, all above
+        banded[band + (6 * j + i) - (6 * k + m), 6 * k + m] -= L
+    return solveh_banded(banded, rhs).reshape(n, 6)
+
+
+def link_information(estimate, T_recorded: np.ndarray) -> np.ndarray:
+    """(6, 6) the information of a refinement (``PoseEstimate.information``: increments (rotation,
+    translation) about its pivot, camera frame) in the coordinates of its correction x (rotation vector,
+    translation; object frame, ``T_recorded exp(x)``): for a pose T = (R, t), y = A^-1 x with
+    A^-1 = [[R, 0], [[t - pivot]_x R, R]], so L_x = A^-T L_y A^-1."""
+    T = estimate.T_camera_object
+    R, a = T[:3, :3], T[:3, 3] - estimate.pivot
+    skew = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    A_inv = np.block([[R, np.zeros((3, 3))], [skew @ R, R]])
+    return A_inv.T @ estimate.information @ A_inv
 
 
 def corrected(T_recorded: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -159,17 +191,21 @@ def corrected(T_recorded: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 
 def frame_to_frame(previous: Segments, frame, T_recorded: np.ndarray, track: TrackParams,
-                   gradients=None, params: MotionParams = MotionParams()) -> np.ndarray | None:
+                   gradients=None, params: MotionParams = MotionParams()) -> tuple[np.ndarray, np.ndarray] | None:
     """The correction (``correction``) of frame's recorded pose measured against an earlier
-    frame's object segments (``previous``: object frame, in that frame's recorded gauge), or None
-    unless the refinement is 'tracked' (with ``params``' limits on its standard deviations)."""
+    frame's object segments (``previous``: object frame, in that frame's recorded gauge) and its
+    information (``link_information``), or None unless the refinement is 'tracked'. The refinement
+    searches ``search_px`` about the recorded pose with ``prior_deg`` / ``prior_mm`` about it
+    (``track._gauss_newton``), and no limit on its standard deviations: ``fuse`` weighs each
+    direction by the link's information instead."""
     if len(previous) < 3:
         return None
     # every sample on the wide levels too: 20-40 segments with one point each were too few there
     # (seed 302: 0.944 / 0.448 with three, 0.879 / 0.436 with one)
-    track = replace(track, max_std_deg=params.max_std_deg, max_std_mm=params.max_std_mm,
-                    coarse_samples_per_segment=track.samples_per_segment)
+    track = replace(track, max_std_deg=np.inf, max_std_mm=np.inf, coarse_samples_per_segment=track.samples_per_segment,
+                    search_px=params.search_px, tukey_px=params.tukey_px, prior_deg=params.prior_deg,
+                    prior_mm=params.prior_mm)
     estimate = refine_pose(previous, frame, T_recorded, track, gradients=gradients)
-    if estimate.status != "tracked":
+    if estimate.status != "tracked" or estimate.information is None:
         return None
-    return correction(T_recorded, estimate.T_camera_object)
+    return correction(T_recorded, estimate.T_camera_object), link_information(estimate, T_recorded)

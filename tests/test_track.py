@@ -464,7 +464,7 @@ def test_accumulate_recording_with_tracked_motion_is_within_0_02_of_the_exact_po
 
 def test_fuse_draws_linked_frames_to_one_gauge_and_drops_a_wrong_correction():
     """Exact frame-to-frame corrections draw the fused errors of linked frames together (to their
-    mean, as far as the relative sigma lets them); a 20 deg correction is gated out instead of
+    mean, as far as the links' information lets them); a 20 deg correction is gated out instead of
     pulling its neighbours by degrees."""
     from accumcli.motion import MotionParams, fuse
 
@@ -472,12 +472,56 @@ def test_fuse_draws_linked_frames_to_one_gauge_and_drops_a_wrong_correction():
     n = 12
     error = np.hstack([np.clip(rng.normal(0, np.radians(1.0), (n, 3)), -np.radians(1.5), np.radians(1.5)),
                        np.clip(rng.normal(0, 0.003, (n, 3)), -0.0045, 0.0045)])   # recorded = true exp(error)
-    corrections = {(k - 1, k): error[k - 1] - error[k] for k in range(1, n)}      # c = x_k - x_{k-1}, x = -error
-    corrections[5, 6] = corrections[5, 6] + np.array([np.radians(20.0), 0, 0, 0, 0, 0])
-    residual = fuse(corrections, n, MotionParams()) + error                       # the error left
-    for part in (slice(0, 6), slice(6, n)):
+    params = MotionParams()
+    seen = params.information_scale * np.diag(np.repeat([1 / np.radians(0.02) ** 2, 1 / 0.00005 ** 2], 3))
+    links = {(k - 1, k): (error[k - 1] - error[k], seen) for k in range(1, n)}   # c = x_k - x_{k-1}, x = -error
+    links[5, 6] = (links[5, 6][0] + np.array([np.radians(20.0), 0, 0, 0, 0, 0]), seen)
+    residual = fuse(links, n, params) + error                                    # the error left
+    # frames 6-11: one chain; frames 0-5 are split once more where two clipped errors differ by
+    # about 3 deg, beyond the gate of the recorded sigma estimated from 11 links (0.56 deg)
+    for part in (slice(0, 3), slice(3, 6), slice(6, n)):
         assert (np.ptp(residual[part], axis=0) < 0.5 * np.ptp(error[part], axis=0)).all()
-    assert np.degrees(np.abs(residual[:, :3])).max() < 1.0 and np.abs(residual[:, 3:]).max() < 0.003
+    assert np.degrees(np.abs(residual[:, :3])).max() < 1.0 and np.abs(residual[:, 3:]).max() < 0.004
+
+
+def test_fuse_takes_from_a_link_only_the_directions_it_sees():
+    """A link that sees only its in-plane rotation (about z) corrects that axis and leaves the others
+    to the recorded poses: two frames whose recorded errors differ by 1 deg about x and about z end
+    with their z difference removed and their x difference kept (within the prior's pull)."""
+    from accumcli.motion import MotionParams, fuse
+
+    params = MotionParams()
+    error = np.zeros((2, 6))
+    error[1, [0, 2]] = np.radians(1.0)
+    seen = np.zeros((6, 6))
+    seen[2, 2] = params.information_scale / np.radians(0.05) ** 2
+    x = fuse({(0, 1): (error[0] - error[1], seen)}, 2, params)
+    residual = np.degrees(x + error)
+    assert abs(residual[1, 2] - residual[0, 2]) < 0.05                    # z: the link's difference
+    assert abs(residual[1, 0] - residual[0, 0]) > 0.9                     # x: unseen, the recorded one
+
+
+def test_link_information_maps_camera_increments_to_the_correction():
+    """The information of a refinement (increments about its pivot, camera frame) in the coordinates
+    of the correction x: a small x gives the quadratic form of the increment it makes."""
+    from accumcli.geometry import rotation_about_point
+    from accumcli.motion import corrected, link_information
+    from accumcli.track import PoseEstimate
+
+    rng = np.random.default_rng(1)
+    T = T_FRONT.copy()
+    pivot = T[:3, 3] + np.array([0.02, -0.01, 0.03])
+    B = rng.normal(size=(6, 6))
+    information = B @ B.T
+    L = link_information(PoseEstimate(T, 0.1, 10, 10, "tracked", information=information, pivot=pivot), T)
+    x = np.concatenate([np.radians(rng.normal(size=3) * 0.01), rng.normal(size=3) * 1e-5])
+    T_x = corrected(T, x)
+    D = T_x @ np.linalg.inv(T)               # the same change as a camera-frame increment about the pivot
+    from scipy.spatial.transform import Rotation
+    w = Rotation.from_matrix(D[:3, :3]).as_rotvec()
+    y = np.concatenate([w, D[:3, :3] @ pivot + D[:3, 3] - pivot])
+    assert np.allclose(rotation_about_point(w, pivot, y[3:]), D, atol=1e-12)
+    assert abs(x @ L @ x - y @ information @ y) < 1e-4 * (y @ information @ y)   # first order
 
 
 @pytest.mark.parametrize("dark_left", [True, False])
