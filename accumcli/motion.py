@@ -12,8 +12,9 @@ pose smear) refined on frame k+1's images. So:
    ``near_m`` / ``near_deg`` of a pass-1 accepted segment (the object's), refines the recorded pose
    of each of the next ``span`` frames against them (``track.refine_pose``), and keeps each
    'tracked' result as a measurement of the correction between the two frames;
-3. the corrections are fused with the recorded poses (``fuse``): a chain of small linear least
-   squares, one per axis; the result is used by the ordinary accumulation (a third pass).
+3. the corrections are fused with the recorded poses (``fuse``): one block-banded linear least squares
+   over all frames, each link weighted by its images' information; the result is used by the
+   ordinary accumulation (a third pass).
 
 The recording is streamed once per pass; kept are the object segments of the last ``span`` frames
 and, per frame, its recorded pose and ``span`` corrections of six numbers.
@@ -161,19 +162,19 @@ def _solve(used: dict, n: int, s: np.ndarray) -> np.ndarray:
     banded = np.zeros((band + 1, 6 * n))        # upper form: banded[band + i - j, j] = H[i, j], i <= j
     banded[band] = np.tile(1 / s ** 2, n)
     rhs = np.zeros(6 * n)
-    rows, cols = np.triu_indices(6)
+    rows, cols = np.triu_indices(6)                                     # a diagonal block's upper triangle
+    i, m = np.meshgrid(np.arange(6), np.arange(6), indexing="ij")     # an off-diagonal block, all of it
     for (j, k), (c, L) in used.items():
         Lc = L @ c
         rhs[6 * k:6 * k + 6] += Lc
         rhs[6 * j:6 * j + 6] -= Lc
-        for a in (j, k):      # the diagonal blocks, upper triangle
+        for a in (j, k):
             banded[band + rows - cols, 6 * a + cols] += L[rows, cols]
-        i, m = np.meshgrid(np.arange(6), np.arange(6), indexing="ij")     # the (j, k) block: -L, all above
-        banded[band + (6 * j + i) - (6 * k + m), 6 * k + m] -= L
+        banded[band + (6 * j + i) - (6 * k + m), 6 * k + m] -= L          # the (j, k) block, above the diagonal
     return solveh_banded(banded, rhs).reshape(n, 6)
 
 
-def link_information(estimate, T_recorded: np.ndarray) -> np.ndarray:
+def link_information(estimate) -> np.ndarray:
     """(6, 6) the information of a refinement (``PoseEstimate.information``: increments (rotation,
     translation) about its pivot, camera frame) in the coordinates of its correction x (rotation vector,
     translation; object frame, ``T_recorded exp(x)``): for a pose T = (R, t), y = A^-1 x with
@@ -208,4 +209,4 @@ def frame_to_frame(previous: Segments, frame, T_recorded: np.ndarray, track: Tra
     estimate = refine_pose(previous, frame, T_recorded, track, gradients=gradients)
     if estimate.status != "tracked" or estimate.information is None:
         return None
-    return correction(T_recorded, estimate.T_camera_object), link_information(estimate, T_recorded)
+    return correction(T_recorded, estimate.T_camera_object), link_information(estimate)

@@ -387,9 +387,10 @@ def _gauss_newton(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, gra
     A wide level (searching more than ``fine_start_px``) samples ``coarse_samples_per_segment`` points
     per segment: it only brings the pose within the fine levels' reach, and its searches are long.
 
-    ``prior`` (T_camera_object (4, 4) or None): with ``params.prior_deg`` / ``prior_mm``, a Gaussian
-    prior of that standard deviation per camera axis (rotation, and translation of the pivot) about it,
-    scaled into pixels by the weighted residual variance of the iteration (floor 0.1 px): the images fix
+    ``prior`` (T_camera_object (4, 4) or None, given when ``params.prior_deg`` is set): a Gaussian
+    prior of ``prior_deg`` / ``prior_mm`` standard deviation per camera axis (rotation, and translation
+    of the pivot) about it, scaled into pixels by the weighted residual variance of the iteration
+    (floor 0.1 px): the images fix
     the well-seen directions, the prior holds the directions they barely see. Why: refining a small
     object's own frame-to-frame motion, out-of-plane rotation and depth are seen weakly (at 0.8 m with
     an 8 cm baseline one pixel of disparity is 14 mm), and without the prior half the refinements
@@ -400,6 +401,8 @@ def _gauss_newton(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, gra
         return None
     points_obj, dirs_obj, expected = samples
     measurements = _measure(transform_points(T, points_obj), rotate_vectors(T, dirs_obj), intr, grads, search, params)
+    if prior is not None:       # the prior's inverse variances per axis (rad^-2, m^-2)
+        inverse = 1 / np.repeat([np.radians(params.prior_deg), params.prior_mm / 1000], 3) ** 2
     for _ in range(params.iterations_per_level):
         P = transform_points(T, points_obj)
         pivot = P.mean(axis=0)  # rotating about the object, not the camera, decouples the increments
@@ -415,9 +418,8 @@ def _gauss_newton(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, gra
         w *= np.concatenate(e_all)          # a segment beyond its cone of views pulls less (expected_weights)
         H = (J * w[:, None]).T @ J + 1e-6 * np.eye(6)
         g = (J * w[:, None]).T @ r
-        if prior is not None and params.prior_deg:
+        if prior is not None:
             sigma2 = max(float(np.sum(w * r ** 2) / max(w.sum(), 1e-9)), 0.01)
-            inverse = 1 / np.repeat([np.radians(params.prior_deg), params.prior_mm / 1000], 3) ** 2
             D = T @ invert(prior)                   # the pose's departure from the prior, camera frame
             departure = np.concatenate([Rotation.from_matrix(D[:3, :3]).as_rotvec(), D[:3, :3] @ pivot + D[:3, 3] - pivot])
             H += sigma2 * np.diag(inverse)

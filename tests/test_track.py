@@ -513,7 +513,7 @@ def test_link_information_maps_camera_increments_to_the_correction():
     pivot = T[:3, 3] + np.array([0.02, -0.01, 0.03])
     B = rng.normal(size=(6, 6))
     information = B @ B.T
-    L = link_information(PoseEstimate(T, 0.1, 10, 10, "tracked", information=information, pivot=pivot), T)
+    L = link_information(PoseEstimate(T, 0.1, 10, 10, "tracked", information=information, pivot=pivot))
     x = np.concatenate([np.radians(rng.normal(size=3) * 0.01), rng.normal(size=3) * 1e-5])
     T_x = corrected(T, x)
     D = T_x @ np.linalg.inv(T)               # the same change as a camera-frame increment about the pivot

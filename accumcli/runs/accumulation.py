@@ -203,7 +203,7 @@ def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str,
         gripper.step(frame, frame.T_camera_object, extraction)
     skeleton = gripper.model()
     skeleton = skeleton.select(skeleton.accepted)
-    recorded, corrections, previous = [], {}, collections.deque(maxlen=motion.span)
+    recorded, links, previous = [], {}, collections.deque(maxlen=motion.span)
     for frame, extraction in store.replay(frames_with_pose()):
         k = len(recorded)
         for j, segments in previous:
@@ -211,8 +211,8 @@ def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str,
             c = frame_to_frame(segments, frame, frame.T_camera_object, params.track, extraction.gradients, motion)
             times.add("tracking", t0)
             if c is not None:
-                corrections[j, k] = c
+                links[j, k] = c
         previous.append((k, object_segments(extraction.segments, frame.T_camera_object, skeleton, motion)))
         recorded.append((frame.index, frame.T_camera_object))
-    x = fuse(corrections, len(recorded), motion)
+    x = fuse(links, len(recorded), motion)
     return {index: corrected(T, xk) for (index, T), xk in zip(recorded, x)}
