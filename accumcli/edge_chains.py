@@ -35,13 +35,12 @@ from __future__ import annotations
 
 
 import numpy as np
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import connected_components
 
 from .chain_kernel import neighbour_links, straight_chain_labels
+from .group_kernel import link_components
 from .grouping import group_range
 from .pair_kernel import collinear_links
-from .lines2d import (EdgePoints, Gradients, LineParams, Segments2D, StageTimes, _canonical, _weighted_line_fit,
+from .lines2d import (EdgePoints, Gradients, LineParams, Segments2D, StageTimes, _canonical, _weighted_line_fit, dot2,
                       detection_start, edge_points, local_segments, refine_on_gradient)
 
 CHAIN_ANGLE_DEG = 20.0        # neighbouring edge pixels link when their gradients differ less than this
@@ -93,15 +92,13 @@ def collinear_lines(points: EdgePoints, chains: np.ndarray, reach_px: float, max
     lab, xy = chains[on], points.xy[on]
     n = int(lab.max()) + 1
     _, center, direction = _weighted_line_fit(lab, n, xy, points.mag[on])
-    t = np.sum((xy - center[lab]) * direction[lab], axis=1)
+    t = dot2(xy - center[lab], direction[lab])
     t_lo, t_hi = group_range(lab, n, t)
     ends = np.concatenate([center + t_lo[:, None] * direction, center + t_hi[:, None] * direction])
     normal = np.column_stack([-direction[:, 1], direction[:, 0]])
     links = collinear_links(ends, center, direction, normal, float(reach_px), float(max_deg),
                             float(np.cos(np.radians(max_deg))), float(max_offset_px))
-    i, j = links[:, 0], links[:, 1]
-    graph = csr_matrix((np.ones(len(i), np.int8), (i, j)), shape=(n, n))
-    return connected_components(graph, directed=False)[1].astype(np.int64)
+    return link_components(n, np.ascontiguousarray(links, np.int64))
 
 
 def _on_lines(segments: Segments2D, points: EdgePoints, chains: np.ndarray, line_of_chain: np.ndarray) -> Segments2D:
@@ -114,7 +111,7 @@ def _on_lines(segments: Segments2D, points: EdgePoints, chains: np.ndarray, line
     _, center, direction = _weighted_line_fit(line, int(line.max()) + 1, points.xy[on], points.mag[on])
     line_id = line_of_chain[segments.line_id]
     direction = _canonical(direction[line_id])
-    t = np.sum((segments.centers - center[line_id]) * direction, axis=1)
+    t = dot2(segments.centers - center[line_id], direction)
     return Segments2D(segments.centers, segments.directions, segments.lengths, segments.polarity,
                       segments.contrast, line_id, t, direction)
 

@@ -46,6 +46,7 @@ import numpy as np
 
 from .errors import InputError
 from .chain_kernel import line_order
+from .group_kernel import group_moments
 from .pair_kernel import junction_growth
 
 
@@ -156,7 +157,10 @@ class Gradients:
 
     @cached_property
     def magnitude(self) -> np.ndarray:
-        return np.hypot(self.gx, self.gy)
+        # = np.hypot, bit for bit, at a sixth of its time: gx, gy are integers / 8 under 1024 / 8
+        # (see ``of``), so their squares and sum are exact in float32 and the sqrt rounds once
+        gx, gy = self.gx, self.gy
+        return np.sqrt(gx * gx + gy * gy)
 
     @cached_property
     def edges(self) -> np.ndarray:
@@ -350,16 +354,18 @@ def _hough_peaks(acc: np.ndarray, flat: np.ndarray, params: LineParams, step: fl
 
 def _weighted_line_fit(index: np.ndarray, n_groups: int, xy: np.ndarray, w: np.ndarray):
     """Per group: weight sum, centroid (G, 2), unit direction (G, 2) of a weighted TLS line fit."""
-    sw = np.bincount(index, w, n_groups)
-    safe = np.where(sw > 0, sw, 1.0)
-    mx = np.bincount(index, w * xy[:, 0], n_groups) / safe
-    my = np.bincount(index, w * xy[:, 1], n_groups) / safe
-    dx, dy = xy[:, 0] - mx[index], xy[:, 1] - my[index]
-    sxx = np.bincount(index, w * dx * dx, n_groups)
-    syy = np.bincount(index, w * dy * dy, n_groups)
-    sxy = np.bincount(index, w * dx * dy, n_groups)
+    sw, mx, my, sxx, syy, sxy = group_moments(np.ascontiguousarray(index, np.int64), int(n_groups),
+                                              np.ascontiguousarray(xy[:, 0], np.float64),
+                                              np.ascontiguousarray(xy[:, 1], np.float64),
+                                              np.ascontiguousarray(w, np.float64))
     angle = 0.5 * np.arctan2(2 * sxy, sxx - syy)
     return sw, np.column_stack([mx, my]), np.column_stack([np.cos(angle), np.sin(angle)])
+
+
+def dot2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise dot products of (N, 2) arrays: ``np.sum(a * b, axis=1)`` bit for bit, without its
+    (N, 2) temporary and short-axis reduction (several times faster)."""
+    return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1]
 
 
 def _canonical(directions: np.ndarray) -> np.ndarray:
@@ -393,9 +399,9 @@ def local_segments(points: EdgePoints, labels: np.ndarray, params: LineParams,
     _, line_center, line_dir = _weighted_line_fit(labels, n_lines, xy, mag)
     line_normal = np.column_stack([-line_dir[:, 1], line_dir[:, 0]])
     rel = xy - line_center[labels]
-    t = np.sum(rel * line_dir[labels], axis=1)
-    across = np.sum(rel * line_normal[labels], axis=1)
-    polarity = np.where(np.sum(g * line_normal[labels], axis=1) >= 0, 1, -1)
+    t = dot2(rel, line_dir[labels])
+    across = dot2(rel, line_normal[labels])
+    polarity = np.where(dot2(g, line_normal[labels]) >= 0, 1, -1)
     keep = np.abs(across) <= params.max_line_distance_px
     xy, mag, labels, t, polarity = xy[keep], mag[keep], labels[keep], t[keep], polarity[keep]
     order = line_order(labels.astype(np.int64), polarity.astype(np.int64), t.astype(np.float64))   # = np.lexsort((t, polarity, labels))
@@ -447,13 +453,13 @@ def local_segments(points: EdgePoints, labels: np.ndarray, params: LineParams,
         t_mean = np.bincount(group, mag_k * t[has_piece], n_groups) / np.maximum(sw, 1e-12)
         directions = line_dir[group_line]
         centers = line_center[group_line] + t_mean[:, None] * directions
-    agree = np.abs(np.sum(directions * line_dir[group_line], axis=1)) >= np.cos(
+    agree = np.abs(dot2(directions, line_dir[group_line])) >= np.cos(
         np.radians(2 * params.vote_window_deg))
     ok = (count >= 3) & agree
     directions = _canonical(directions[ok])
     own_normal = np.column_stack([-directions[:, 1], directions[:, 0]])
-    sign = np.sign(np.sum(own_normal * line_normal[group_line[ok]], axis=1))
-    seg_t = np.sum((centers[ok] - line_center[group_line[ok]]) * line_dir[group_line[ok]], axis=1)
+    sign = np.sign(dot2(own_normal, line_normal[group_line[ok]]))
+    seg_t = dot2(centers[ok] - line_center[group_line[ok]], line_dir[group_line[ok]])
     lengths = piece_length[group_run[ok]] if adapt_length else np.full(int(ok.sum()), L)
     return Segments2D(centers=centers[ok], directions=directions, lengths=lengths,
                       polarity=(group_polarity[ok] * sign).astype(np.int8), contrast=(sw / np.maximum(count, 1))[ok],
@@ -490,12 +496,12 @@ def refine_on_gradient(segments: Segments2D, magnitude: np.ndarray, profiles: in
     peaks = base + np.clip(offset, -reach, reach)[..., None] * normals[:, None, :]
     group = np.repeat(np.arange(n), profiles)
     _, centers, directions = _weighted_line_fit(group, n, peaks.reshape(-1, 2), np.maximum(m1, 1e-6).ravel())
-    directions = np.where((np.sum(directions * segments.directions, axis=1) < 0)[:, None], -directions, directions)
+    directions = np.where((dot2(directions, segments.directions) < 0)[:, None], -directions, directions)
     refined = Segments2D(centers, directions, segments.lengths, segments.polarity, segments.contrast,
                          segments.line_id, segments.t, segments.line_direction)
     # a cut that lost the edge (corner, clutter) shows as a large change: keep the original then
-    moved = (np.abs(np.sum((centers - segments.centers) * normals, axis=1)) > 1.0) | \
-        (np.abs(np.sum(directions * segments.directions, axis=1)) < np.cos(np.radians(max_turn_deg)))
+    moved = (np.abs(dot2(centers - segments.centers, normals)) > 1.0) | \
+        (np.abs(dot2(directions, segments.directions)) < np.cos(np.radians(max_turn_deg)))
     return Segments2D(*(np.where(moved.reshape((-1,) + (1,) * (a.ndim - 1)), a, b)
                         for a, b in ((getattr(segments, f), getattr(refined, f))
                                      for f in Segments2D.__dataclass_fields__)))
@@ -580,7 +586,7 @@ def pieces_on_lines(a: np.ndarray, b: np.ndarray, grad: Gradients, params: LineP
     along_normal = (g[..., 0] * normals[:, 0:1] + g[..., 1] * normals[:, 1:2]).mean(axis=1)
     line_direction = _canonical(direction)[line]
     # t along the canonical line direction
-    t = np.where(np.sum(line_direction * direction[line], axis=1) < 0, -t, t)
+    t = np.where(dot2(line_direction, direction[line]) < 0, -t, t)
     segments = Segments2D(centers, directions, piece_length, np.where(along_normal >= 0, 1, -1).astype(np.int8),
                           np.abs(along_normal).astype(np.float64), line, t, line_direction)
     return refine_on_gradient(segments.select(segments.contrast >= params.gradient_threshold / 2), grad.magnitude)

@@ -1,0 +1,84 @@
+"""Compiled per-group sums and labels over edge points (numba, installed as a wheel).
+
+Why compiled: each is one pass over the points, where numpy needed a whole-array call per sum
+(``np.bincount`` six times for a line fit), a sort (the per-group range) or a sparse graph
+(``scipy.sparse.csgraph.connected_components``), and 2D detection calls them on every image. The
+results are those of the numpy versions bit for bit: sums in index order, as ``np.bincount``
+adds, and components numbered by their lowest index, as scipy numbers them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .jit import kernel
+
+
+@kernel
+def group_moments(index, n, x, y, w):  # pragma: no cover
+    """Per group 0..``n``-1 of the points (``index`` (M,) int64, ``x``, ``y``, ``w`` (M,) float64):
+    weight sum, weighted mean x and y (0 for a group of zero weight), and the weighted second
+    moments about the mean, sum w dx dx, w dy dy, w dx dy ((n,) float64 each)."""
+    sw, sx, sy = np.zeros(n), np.zeros(n), np.zeros(n)
+    for i in range(len(index)):
+        k = index[i]
+        sw[k] += w[i]
+        sx[k] += w[i] * x[i]
+        sy[k] += w[i] * y[i]
+    for k in range(n):
+        safe = sw[k] if sw[k] > 0 else 1.0
+        sx[k] /= safe
+        sy[k] /= safe
+    sxx, syy, sxy = np.zeros(n), np.zeros(n), np.zeros(n)
+    for i in range(len(index)):
+        k = index[i]
+        dx, dy = x[i] - sx[k], y[i] - sy[k]
+        sxx[k] += w[i] * dx * dx
+        syy[k] += w[i] * dy * dy
+        sxy[k] += w[i] * dx * dy
+    return sw, sx, sy, sxx, syy, sxy
+
+
+@kernel
+def group_range(groups, n, values):  # pragma: no cover
+    """(n,) smallest and (n,) largest of ``values`` (M,) float64 per group 0..``n``-1 of ``groups``
+    (M,) int64 (inf and -inf for an empty group)."""
+    lo, hi = np.full(n, np.inf), np.full(n, -np.inf)
+    for i in range(len(groups)):
+        k = groups[i]
+        if values[i] < lo[k]:
+            lo[k] = values[i]
+        if values[i] > hi[k]:
+            hi[k] = values[i]
+    return lo, hi
+
+
+@kernel
+def link_components(n, links):  # pragma: no cover
+    """(n,) int64 component 0..C-1 of every node of the undirected graph ``links`` (E, 2) int64,
+    numbered by their lowest node (union by the smaller root, then one pass in node order)."""
+    parent = np.arange(n)
+    for k in range(len(links)):
+        a, b = links[k, 0], links[k, 1]
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        while parent[b] != b:
+            parent[b] = parent[parent[b]]
+            b = parent[b]
+        if a < b:
+            parent[b] = a
+        elif b < a:
+            parent[a] = b
+    label = np.empty(n, np.int64)
+    count = 0
+    for i in range(n):
+        root = i
+        while parent[root] != root:
+            root = parent[root]
+        if root == i:
+            label[i] = count
+            count += 1
+        else:
+            label[i] = label[root]
+    return label

@@ -1,0 +1,48 @@
+"""The compiled per-group kernels give the numpy / scipy results bit for bit."""
+
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
+
+from accumcli.group_kernel import group_moments, group_range, link_components
+from accumcli.lines2d import dot2
+
+
+def test_group_moments_equal_bincount_sums_bit_for_bit():
+    rng = np.random.default_rng(3)
+    n = 40
+    index = rng.integers(0, n - 2, 5000)            # the last two groups empty
+    x, y, w = rng.normal(300, 100, 5000), rng.normal(200, 80, 5000), rng.uniform(0, 50, 5000)
+    sw, mx, my, sxx, syy, sxy = group_moments(index, n, x, y, w)
+    ref_sw = np.bincount(index, w, n)
+    safe = np.where(ref_sw > 0, ref_sw, 1.0)
+    ref_mx, ref_my = np.bincount(index, w * x, n) / safe, np.bincount(index, w * y, n) / safe
+    dx, dy = x - ref_mx[index], y - ref_my[index]
+    for got, ref in ((sw, ref_sw), (mx, ref_mx), (my, ref_my), (sxx, np.bincount(index, w * dx * dx, n)),
+                     (syy, np.bincount(index, w * dy * dy, n)), (sxy, np.bincount(index, w * dx * dy, n))):
+        assert np.array_equal(got, ref)
+    assert sw[-1] == 0 and mx[-1] == 0
+
+
+def test_group_range_is_each_groups_min_and_max():
+    rng = np.random.default_rng(4)
+    groups, values = rng.integers(0, 30, 2000), rng.normal(0, 10, 2000)
+    lo, hi = group_range(groups, 32, values)
+    for k in range(30):
+        assert lo[k] == values[groups == k].min() and hi[k] == values[groups == k].max()
+    assert np.isinf(lo[30:]).all() and (lo[30:] > 0).all() and (hi[30:] < 0).all()
+
+
+def test_link_components_number_components_as_scipy_does():
+    rng = np.random.default_rng(5)
+    n = 500
+    links = rng.integers(0, n, (300, 2))
+    graph = csr_matrix((np.ones(len(links), np.int8), (links[:, 0], links[:, 1])), shape=(n, n))
+    assert np.array_equal(link_components(n, links), connected_components(graph, directed=False)[1])
+    assert np.array_equal(link_components(3, np.zeros((0, 2), np.int64)), [0, 1, 2])
+
+
+def test_dot2_equals_the_sum_of_products():
+    rng = np.random.default_rng(6)
+    a, b = rng.normal(size=(100, 2)), rng.normal(size=(100, 2))
+    assert np.array_equal(dot2(a, b), np.sum(a * b, axis=1))
