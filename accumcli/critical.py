@@ -48,9 +48,9 @@ edge length is critical) gains.
 from __future__ import annotations
 
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
 from scipy.spatial import cKDTree
 
+from .ncc_kernel import row_ncc
 from .lines2d import Gradients, Segments2D, parabola_peak, sample
 from .recording import StereoIntrinsics
 from .segments import Segments
@@ -69,49 +69,17 @@ def _runs(left: Segments2D, index: np.ndarray, gap_px: float) -> tuple[np.ndarra
     return order[first], np.minimum.reduceat(start, first), np.maximum.reduceat(end, first)
 
 
-def _patches(img: np.ndarray, top: np.ndarray, left: np.ndarray, rows: int, columns: int) -> np.ndarray:
-    """(M, rows, columns) copies of ``img`` from (``top``, ``left``) (M,) px, the border pixels
-    repeated beyond the image (as clipping the indices would): one strided gather of a padded
-    image's sliding windows instead of fancy indexing with (M, rows, columns) index arrays."""
-    height, width = img.shape
-    if len(top) == 0:
-        return np.zeros((0, rows, columns), img.dtype)
-    pad_top, pad_left = max(0, -int(top.min())), max(0, -int(left.min()))
-    pad_bottom = max(0, int(top.max()) + rows - height)
-    pad_right = max(0, int(left.max()) + columns - width)
-    padded = np.pad(img, ((pad_top, pad_bottom), (pad_left, pad_right)), mode="edge")
-    return sliding_window_view(padded, (rows, columns))[top + pad_top, left + pad_left]
-
-
 def _block_match(left_img: np.ndarray, right_img: np.ndarray, ends: np.ndarray, d_lo: int, d_hi: int,
                  w: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per end (M, 2) (u, v) px in the left image: the disparity (M,) px of the best NCC of its
     window along its row in the right image, that NCC (M,), and the best NCC at least 3 px away.
 
     Windows sit on whole pixels (the end rounded): the sums are then exact integers, so the
-    result does not depend on the summation order, which numpy's SIMD loops choose by memory
-    alignment (the same bytes out in every process)."""
+    result does not depend on the summation order (the same bytes out in every process). The NCC
+    itself: ``ncc_kernel.row_ncc``."""
     column = np.rint(ends[:, 0]).astype(np.int64)
     row = np.rint(ends[:, 1]).astype(np.int64)
-    h = 2 * w + 1
-    # integer grey levels: the window products and their sums (h * h * 255^2, under 2^24 for
-    # windows up to 15 x 15) are integers, exact in float32 whatever the order of summation
-    window = _patches(left_img, row - w, column - w, h, h).astype(np.float32)                 # (M, h, h)
-    strip = _patches(right_img, row - w, column - d_hi - w, h, d_hi - d_lo + h).astype(np.float32)   # (M, h, D + 2w)
-    shifts = strip.shape[2] - h + 1
-    cross = np.zeros((len(ends), shifts), np.float32)
-    for x in range(h):        # a batched (1, h) @ (h, D) product per window column: 5x einsum's speed
-        cross += np.matmul(window[:, None, :, x], strip[:, :, x:x + shifts])[:, 0]
-    column_sums = np.concatenate([np.zeros((len(ends), 2, 1)), np.cumsum(np.stack(
-        [strip.sum(axis=1, dtype=np.float64), (strip * strip).sum(axis=1, dtype=np.float64)], 1), axis=2)], 2)
-    sum_b, square_b = (column_sums[:, i, h:] - column_sums[:, i, :-h] for i in (0, 1))         # (M, D) each
-    sum_a = window.sum(axis=(1, 2), dtype=np.float64)
-    n = h * h
-    cross = cross.astype(np.float64) * n - sum_a[:, None] * sum_b
-    energy_b = square_b.astype(np.float64) * n - sum_b.astype(np.float64) ** 2
-    energy_a = (window * window).sum(axis=(1, 2), dtype=np.float64) * n - sum_a ** 2
-    denominator = np.sqrt(np.maximum(energy_b, 0.0) * energy_a[:, None])
-    ncc = np.where(denominator > 0, cross / np.maximum(denominator, 1.0), 0.0)                  # (M, D)
+    ncc = row_ncc(left_img, right_img, row, column, int(d_lo), int(d_hi), int(w))                 # (M, D)
     k = np.argmax(ncc, axis=1)
     rows_m = np.arange(len(ends))
     best = ncc[rows_m, k]

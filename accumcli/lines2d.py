@@ -130,6 +130,7 @@ class Gradients:
     blur_sigma: float
     gradient_threshold: float
     tensor_sigma: float
+    sobel: "tuple[np.ndarray, np.ndarray] | None" = field(default=None, repr=False)   # 8 gx, 8 gy as int16
 
     @classmethod
     def of(cls, image: np.ndarray, params: "LineParams | None" = None,
@@ -142,12 +143,14 @@ class Gradients:
         if reuse is not None and reuse.blur_sigma == params.blur_sigma:
             if (reuse.gradient_threshold, reuse.tensor_sigma) == (params.gradient_threshold, params.tensor_sigma):
                 return reuse
-            return cls(reuse.gx, reuse.gy, params.blur_sigma, params.gradient_threshold, params.tensor_sigma)
+            return cls(reuse.gx, reuse.gy, params.blur_sigma, params.gradient_threshold, params.tensor_sigma,
+                       reuse.sobel)
         blurred = cv2.GaussianBlur(image, (0, 0), params.blur_sigma) if params.blur_sigma > 0 else image
-        # Sobel of 8-bit grey levels is an integer: float32 holds it, and gx * 8 gives it back exactly
-        gx = cv2.Sobel(blurred, cv2.CV_32F, 1, 0, ksize=3) / np.float32(8.0)
-        gy = cv2.Sobel(blurred, cv2.CV_32F, 0, 1, ksize=3) / np.float32(8.0)
-        return cls(gx, gy, params.blur_sigma, params.gradient_threshold, params.tensor_sigma)
+        # Sobel of 8-bit grey levels is an integer (|.| <= 1020): int16 holds it for Canny, and
+        # float32 / 8 exactly
+        dx, dy = cv2.Sobel(blurred, cv2.CV_16S, 1, 0, ksize=3), cv2.Sobel(blurred, cv2.CV_16S, 0, 1, ksize=3)
+        gx, gy = dx * np.float32(0.125), dy * np.float32(0.125)
+        return cls(gx, gy, params.blur_sigma, params.gradient_threshold, params.tensor_sigma, (dx, dy))
 
     @cached_property
     def gxy(self) -> np.ndarray:
@@ -165,7 +168,7 @@ class Gradients:
     @cached_property
     def edges(self) -> np.ndarray:
         high = 8.0 * self.gradient_threshold
-        dx, dy = ((g * 8).astype(np.int16) for g in (self.gx, self.gy))   # exact integers (see ``of``): no rint
+        dx, dy = self.sobel or ((g * 8).astype(np.int16) for g in (self.gx, self.gy))   # exact integers (``of``)
         return cv2.Canny(dx, dy, high / 2, high, L2gradient=True)
 
     @cached_property

@@ -51,7 +51,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .grouping import best_per_key, group_range
-from .lines2d import Segments2D, sample
+from .lines2d import Segments2D, dot2, sample
 from .recording import StereoIntrinsics
 from .segments import Segments
 
@@ -143,11 +143,11 @@ def match(left_img: np.ndarray, right_img: np.ndarray, left: Segments2D, right: 
     disparity = left.centers[li, 0] - _row_crossing(right, rj, v)
     d_min = intr.fx * intr.baseline / params.max_depth_m
     d_max = intr.fx * intr.baseline / params.min_depth_m
-    cos_diff = np.abs(np.sum(left.directions[li] * right.directions[rj], axis=1))
+    cos_diff = np.abs(dot2(left.directions[li], right.directions[rj]))
     grad_l = left.normals[li] * left.polarity[li, None]
     grad_r = right.normals[rj] * right.polarity[rj, None]
     ok = ((np.abs(v - right.centers[rj, 1]) <= half_height) & (disparity >= d_min) & (disparity <= d_max)
-          & (np.sum(grad_l * grad_r, axis=1) > 0)
+          & (dot2(grad_l, grad_r) > 0)
           & (cos_diff >= np.cos(np.radians(params.max_orientation_diff_deg))))
     li, rj, disparity, cos_diff = li[ok], rj[ok], disparity[ok], cos_diff[ok]
     if len(li) == 0:
