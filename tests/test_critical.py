@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+import pytest
 
 from accumcli.critical import _block_match, _peak_trusted
 from accumcli.stereo import StereoParams
@@ -62,3 +63,25 @@ def test_a_disparity_range_too_narrow_for_the_peak_test_gives_no_segments_and_no
     assert extract_frame(frame, ExtractParams()).counts["critical_3d"] >= 6
     tiny = replace(frame, intrinsics=replace(frame.intrinsics, baseline=1e-4))
     assert extract_frame(tiny, ExtractParams()).counts["critical_3d"] == 0
+
+
+def test_row_ncc_is_the_normalized_cross_correlation_of_each_shift():
+    from accumcli.ncc_kernel import row_ncc
+
+    rng = np.random.default_rng(7)
+    left = rng.integers(0, 256, (40, 60)).astype(np.uint8)
+    right = np.roll(left, -9, axis=1)                    # disparity 9 everywhere
+    right[:, :4] = 128                                   # flat: windows there correlate 0
+    row, column = np.array([20, 3]), np.array([30, 40])  # the second window reaches past the top
+    ncc = row_ncc(left, right, row, column, 2, 20, 3)
+    assert ncc.shape == (2, 19)
+    for m in range(2):
+        rows = np.clip(np.arange(row[m] - 3, row[m] + 4), 0, 39)
+        a = left[rows][:, column[m] - 3:column[m] + 4].astype(float).ravel()
+        for k in range(19):
+            c = column[m] - 20 + k
+            b = right[rows][:, c - 3:c + 4].astype(float).ravel()
+            assert ncc[m, k] == pytest.approx(np.corrcoef(a, b)[0, 1], abs=1e-12)
+        assert 20 - np.argmax(ncc[m]) == 9 and ncc[m].max() == pytest.approx(1.0)
+    flat = row_ncc(np.full((20, 20), 7, np.uint8), right[:20, :20], np.array([10]), np.array([15]), 1, 8, 2)
+    assert (flat == 0).all()
