@@ -47,6 +47,7 @@ import numpy as np
 from .errors import InputError
 from .chain_kernel import line_order
 from .group_kernel import group_moments
+from .profile_kernel import cut_grid, cut_peaks
 from .pair_kernel import junction_growth
 
 
@@ -488,17 +489,12 @@ def refine_on_gradient(segments: Segments2D, magnitude: np.ndarray, profiles: in
     normals = segments.normals
     t = np.linspace(-0.4, 0.4, profiles)[None, :] * segments.lengths[:, None]                 # (N, P)
     h = np.arange(-reach, reach + 1, dtype=float)                                              # (H,)
-    base = segments.centers[:, None, :] + t[..., None] * segments.directions[:, None, :]       # (N, P, 2)
-    x = base[:, :, None, 0] + h[None, None, :] * normals[:, None, None, 0]                      # (N, P, H)
-    y = base[:, :, None, 1] + h[None, None, :] * normals[:, None, None, 1]
-    m = sample(magnitude, x, y)                                                                 # (N, P, H)
-    best = np.clip(np.argmax(m, axis=2), 1, len(h) - 2)
-    take = lambda k: np.take_along_axis(m, (best + k)[..., None], axis=2)[..., 0]  # noqa: E731
-    m0, m1, m2 = take(-1), take(0), take(1)
-    offset = h[best] + parabola_peak(m0, m1, m2)
-    peaks = base + np.clip(offset, -reach, reach)[..., None] * normals[:, None, :]
+    base, x, y = cut_grid(*(np.ascontiguousarray(a, np.float64) for a in (segments.centers, segments.directions,
+                                                                          normals, t)), h)     # (N, P, 2), (N, P, H)
+    peaks, weights = cut_peaks(sample(magnitude, x, y), base, np.ascontiguousarray(normals, np.float64), h,
+                               float(reach))
     group = np.repeat(np.arange(n), profiles)
-    _, centers, directions = _weighted_line_fit(group, n, peaks.reshape(-1, 2), np.maximum(m1, 1e-6).ravel())
+    _, centers, directions = _weighted_line_fit(group, n, peaks.reshape(-1, 2), weights.ravel())
     directions = np.where((dot2(directions, segments.directions) < 0)[:, None], -directions, directions)
     refined = Segments2D(centers, directions, segments.lengths, segments.polarity, segments.contrast,
                          segments.line_id, segments.t, segments.line_direction)
