@@ -46,3 +46,13 @@ def test_dot2_equals_the_sum_of_products():
     rng = np.random.default_rng(6)
     a, b = rng.normal(size=(100, 2)), rng.normal(size=(100, 2))
     assert np.array_equal(dot2(a, b), np.sum(a * b, axis=1))
+
+
+def test_magnitude_equals_hypot_on_sobel_gradients():
+    import cv2
+    from accumcli.lines2d import Gradients
+
+    image = np.random.default_rng(8).integers(0, 256, (60, 80)).astype(np.uint8)
+    grad = Gradients.of(image)
+    assert np.array_equal(grad.magnitude, np.hypot(grad.gx, grad.gy))
+    assert np.array_equal(grad.gx * 8, cv2.Sobel(cv2.GaussianBlur(image, (0, 0), grad.blur_sigma), cv2.CV_32F, 1, 0))
