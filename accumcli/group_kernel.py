@@ -42,6 +42,25 @@ def group_moments(index, n, x, y, w):  # pragma: no cover
 
 
 @kernel
+def line_coordinates(xy, g, index, center, direction):  # pragma: no cover
+    """Per point (``xy``, gradient ``g`` (M, 2) float64, line ``index`` (M,) int64) in the frame of
+    its line (``center``, unit ``direction`` (L, 2), normal (-dy, dx)): (M,) position along the line,
+    (M,) offset across it, and (M,) int64 polarity, 1 where the gradient points along the normal
+    (or across it), else -1."""
+    m = len(index)
+    t, across = np.empty(m), np.empty(m)
+    polarity = np.empty(m, np.int64)
+    for i in range(m):
+        k = index[i]
+        dx, dy = direction[k, 0], direction[k, 1]
+        rx, ry = xy[i, 0] - center[k, 0], xy[i, 1] - center[k, 1]
+        t[i] = rx * dx + ry * dy
+        across[i] = rx * -dy + ry * dx
+        polarity[i] = 1 if g[i, 0] * -dy + g[i, 1] * dx >= 0 else -1
+    return t, across, polarity
+
+
+@kernel
 def group_range(groups, n, values):  # pragma: no cover
     """(n,) smallest and (n,) largest of ``values`` (M,) float64 per group 0..``n``-1 of ``groups``
     (M,) int64 (inf and -inf for an empty group)."""

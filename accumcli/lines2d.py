@@ -46,7 +46,7 @@ import numpy as np
 
 from .errors import InputError
 from .chain_kernel import line_order
-from .group_kernel import group_moments, magnitude as magnitude_image
+from .group_kernel import group_moments, line_coordinates, magnitude as magnitude_image
 from .profile_kernel import cut_grid, cut_peaks
 from .pair_kernel import junction_growth
 
@@ -395,20 +395,17 @@ def local_segments(points: EdgePoints, labels: np.ndarray, params: LineParams,
     the line's point at the piece's mean position along it) instead of its own pixels' fit; for
     labels that are straight by construction, whose whole fit is steadier than a few pixels'.
     """
-    on_line = labels >= 0
-    xy, g, mag, labels = points.xy[on_line], points.g[on_line], points.mag[on_line], labels[on_line]
-    if len(labels) == 0:
+    on_line = np.flatnonzero(labels >= 0)
+    if len(on_line) == 0:
         return _empty()
+    xy, g, mag, labels = points.xy[on_line], points.g[on_line], points.mag[on_line], labels[on_line].astype(np.int64)
     n_lines = int(labels.max()) + 1
     _, line_center, line_dir = _weighted_line_fit(labels, n_lines, xy, mag)
     line_normal = np.column_stack([-line_dir[:, 1], line_dir[:, 0]])
-    rel = xy - line_center[labels]
-    t = dot2(rel, line_dir[labels])
-    across = dot2(rel, line_normal[labels])
-    polarity = np.where(dot2(g, line_normal[labels]) >= 0, 1, -1)
-    keep = np.abs(across) <= params.max_line_distance_px
-    xy, mag, labels, t, polarity = xy[keep], mag[keep], labels[keep], t[keep], polarity[keep]
-    order = line_order(labels.astype(np.int64), polarity.astype(np.int64), t.astype(np.float64))   # = np.lexsort((t, polarity, labels))
+    t, across, polarity = line_coordinates(np.ascontiguousarray(xy, np.float64), np.ascontiguousarray(g, np.float64),
+                                           labels, line_center, line_dir)
+    keep = np.flatnonzero(np.abs(across) <= params.max_line_distance_px)
+    order = keep[line_order(labels[keep], polarity[keep], t[keep])]   # = np.lexsort((t, polarity, labels)) of those kept
     xy, mag, labels, t, polarity = xy[order], mag[order], labels[order], t[order], polarity[order]
     # runs of supporting pixels
     L = params.segment_length_px

@@ -56,3 +56,15 @@ def test_magnitude_equals_hypot_on_sobel_gradients():
     grad = Gradients.of(image)
     assert np.array_equal(grad.magnitude, np.hypot(grad.gx, grad.gy))
     assert np.array_equal(grad.gx * 8, cv2.Sobel(cv2.GaussianBlur(image, (0, 0), grad.blur_sigma), cv2.CV_32F, 1, 0))
+
+
+def test_line_coordinates_place_points_along_and_across_their_line():
+    from accumcli.group_kernel import line_coordinates
+
+    center, direction = np.array([[10.0, 20.0], [0.0, 0.0]]), np.array([[0.6, 0.8], [1.0, 0.0]])
+    xy = np.array([[10.0 + 3 * 0.6 - 2 * 0.8, 20.0 + 3 * 0.8 + 2 * 0.6], [5.0, -1.0]])
+    g = np.array([[-0.8, 0.6], [0.0, 2.0]])            # along both lines' normals
+    t, across, polarity = line_coordinates(xy, g, np.array([0, 1]), center, direction)
+    assert np.allclose(t, [3, 5]) and np.allclose(across, [2, -1]) and list(polarity) == [1, 1]
+    t, across, polarity = line_coordinates(xy, -g, np.array([0, 1]), center, direction)
+    assert list(polarity) == [-1, -1]
