@@ -13,7 +13,48 @@ def test_two_workers_give_the_same_model_and_frames_bytes(small_recording, tmp_p
         extract_recording(small_recording, str(frames), frames=FrameRange(0, 4), workers=workers)
         outputs[workers] = (model.read_bytes(), frames.read_bytes(), result.frames, sorted(result.times.seconds))
     assert outputs[1] == outputs[2]
-    assert outputs[1][2] == 4 and "hough" in outputs[1][3]   # stage times come back from the workers
+    assert outputs[1][2] == 4 and "hough" in outputs[1][3]
+
+
+def test_this_process_and_a_ready_helper_share_the_frames_and_hand_them_back_in_order(small_recording, monkeypatch):
+    from concurrent.futures import wait
+
+    import numpy as np
+
+    from accumcli.extract import ExtractParams, extract_frame
+    from accumcli.lines2d import StageTimes
+    from accumcli.recording import Recording
+    from accumcli.runs import parallel
+
+    submitted = {"ready": [], "frames": 0}
+    submit = parallel.ProcessPoolExecutor.submit
+
+    def counting_submit(pool, fn, *args, **kwargs):
+        future = submit(pool, fn, *args, **kwargs)
+        if fn is parallel._ready:
+            submitted["ready"].append(future)
+        else:
+            submitted["frames"] += 1
+        return future
+
+    monkeypatch.setattr(parallel.ProcessPoolExecutor, "submit", counting_submit)
+    with Recording(small_recording) as rec:
+        frames = list(rec.frames())
+    params = ExtractParams()
+
+    def frames_once_the_helper_is_ready():
+        yield frames[0]                 # this process extracts it: the helper is starting
+        wait(submitted["ready"], timeout=120)
+        yield from frames[1:]
+
+    times = StageTimes()
+    got = list(parallel.extracted_frames(frames_once_the_helper_is_ready(), params, "camera_left", 2, times))
+    assert 1 <= submitted["frames"] <= len(frames) - 1
+    assert [frame.index for frame, _ in got] == [frame.index for frame in frames]
+    for (_, extraction), frame in zip(got, frames):
+        alone = extract_frame(frame, params, "camera_left")
+        assert np.array_equal(extraction.segments.centers, alone.segments.centers)
+    assert times.seconds["hough"] > 0
 
 
 def test_auto_workers_use_both_cores_only_for_recordings_long_enough(monkeypatch):

@@ -1,10 +1,14 @@
 """Extraction of the next frames in other processes while the current one is accumulated.
 
-Frames are independent given the recorded poses, so with ``workers`` > 1 the frames read (in
-this process, in order) are extracted by a pool of ``workers`` processes, at most
-``2 * workers`` frames ahead, and handed back in recording order: memory stays bounded and the
-result is the same, byte for byte, whatever the number of workers (extraction of one frame is
-deterministic). With ``workers`` = 1 extraction runs inline, without a pool.
+Frames are independent given the recorded poses, so with ``workers`` > 1 this process and a pool
+of ``workers - 1`` helper processes extract them, at most ``2 * workers`` frames ahead of the one
+handed on, and hand them back in recording order: memory stays bounded and the result is the same,
+byte for byte, whatever the number of workers (extraction of one frame is deterministic). A helper
+takes a frame only when it is ready (its start-up, importing the library and loading the compiled
+kernels, takes about a second, 30 frames' work); until then, and whenever the helpers have enough
+frames queued, this process extracts the frame itself. So a short recording costs no more than
+with one worker, and a long one uses both cores from the first second. With ``workers`` = 1
+extraction runs inline, without a pool.
 
 The pool starts its processes from a fork server (``forkserver``), not by forking this process:
 a fork of a process whose OpenCV and BLAS thread pools are running can deadlock in the child. As
@@ -17,7 +21,7 @@ from __future__ import annotations
 import collections
 import multiprocessing
 import os
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor
 from typing import Iterable, Iterator
 
 from ..extract import ExtractParams, FrameSegments, extract_frame
@@ -29,6 +33,22 @@ def _one_thread() -> None:
     import cv2
 
     cv2.setNumThreads(1)
+
+
+def _ready() -> bool:
+    """A helper's warm-up: the compiled kernels loaded, by extracting a small made-up pair (a
+    slanted bright quadrilateral, 8 px of disparity), so that its first real frame is not a slow one."""
+    import cv2
+    import numpy as np
+
+    from ..recording import StereoIntrinsics
+
+    left = np.full((120, 160), 40, np.uint8)
+    cv2.fillConvexPoly(left, np.array([[50, 30], [120, 40], [110, 95], [40, 85]], np.int32), 200)
+    right = np.roll(left, -8, axis=1)
+    intrinsics = StereoIntrinsics(fx=100.0, fy=100.0, cx=80.0, cy=60.0, baseline=0.04, width=160, height=120)
+    extract_frame(StereoFrame(0, 0, left, right, intrinsics, None), ExtractParams(), "camera")
+    return True
 
 
 def _extract(frame: StereoFrame, params: ExtractParams, camera_frame: str) -> tuple[FrameSegments, dict]:
@@ -44,10 +64,10 @@ AUTO_MIN_FRAMES = 40
 def resolve_workers(workers: int | None, frames: int) -> int:
     """``workers``, or for None (``--workers auto``) what measured fastest on two cores: 2 processes,
     but 1 for fewer than ``AUTO_MIN_FRAMES`` frames or on one CPU. Measured with ``accum accumulate``
-    as a whole command (start-up included; farm-bench, 2-core machine): 2 workers took 1.02x the
-    wall time of one on 24 and 36 frames (the pool's start-up, each worker importing the library and
-    loading the compiled kernels, outweighs) and 0.81x on 60 frames of 640x480. More than 2 was not
-    measured: give ``--workers N`` on a bigger machine."""
+    as a whole command (start-up included; farm-bench, 2-core machine, A B A B): 2 workers took
+    1.00x the wall time of one on 36 frames (the helper is still starting for most of them), 0.88x on
+    60 frames and 0.67x on 120 of 640x480. Under 40 frames a run would wait for a helper that is
+    still starting. More than 2 was not measured: give ``--workers N`` on a bigger machine."""
     if workers is not None:
         return workers
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
@@ -63,19 +83,31 @@ def extracted_frames(frames: Iterable[StereoFrame], params: ExtractParams, camer
         return
     methods = multiprocessing.get_all_start_methods()
     context = multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
-    with ProcessPoolExecutor(workers, mp_context=context, initializer=_one_thread) as pool:
-        pending: collections.deque = collections.deque()
+    helpers = workers - 1
+    with ProcessPoolExecutor(helpers, mp_context=context, initializer=_one_thread) as pool:
+        ready = [pool.submit(_ready) for _ in range(helpers)]
+        pending: collections.deque = collections.deque()    # (frame, future or finished extraction)
         for frame in frames:
-            pending.append((frame, pool.submit(_extract, frame, params, camera_frame)))
-            if len(pending) >= 2 * workers:
+            queued = sum(isinstance(work, Future) and not work.done() for _, work in pending)
+            if all(r.done() for r in ready) and queued < 2 * helpers:
+                pending.append((frame, pool.submit(_extract, frame, params, camera_frame)))
+            else:                      # the helpers are starting or busy: this process takes it
+                pending.append((frame, (extract_frame(frame, params, camera_frame, times), None)))
+            while pending and (len(pending) > 2 * workers or _finished(pending[0][1])):
                 yield _collect(pending.popleft(), times)
         while pending:
             yield _collect(pending.popleft(), times)
 
 
+def _finished(work) -> bool:
+    return not isinstance(work, Future) or work.done()
+
+
 def _collect(item, times: StageTimes) -> tuple[StereoFrame, FrameSegments]:
-    frame, future = item
-    extraction, seconds = future.result()
-    for stage, value in seconds.items():
+    """(frame, extraction) of a pending item, its helper's stage times added to ``times`` (this
+    process's own extractions added theirs already)."""
+    frame, work = item
+    extraction, seconds = work.result() if isinstance(work, Future) else work
+    for stage, value in (seconds or {}).items():
         times.seconds[stage] = times.seconds.get(stage, 0.0) + value
     return frame, extraction
