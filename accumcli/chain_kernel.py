@@ -44,20 +44,31 @@ def straight_chain_labels(xy, mag, pixel, links, max_residual_px, rounds, min_le
     link_alive = np.ones(e, np.bool_)
     active = np.ones(m, np.bool_)
     key = np.zeros(m, np.int64)
-    comp = np.empty(m, np.int64)
+    comp = np.full(m, -1, np.int64)
     stack = np.empty(m, np.int64)
+    points = np.arange(m)               # the active points, ascending: each round walks only these
+    n_points = m
+    live = np.arange(e)                 # the links still alive, ascending
+    n_live = e
     n_final = 0
     for round_ in range(rounds + 1):
         # a link lives on while its two ends are active and on the same side of every cut
-        for k in range(e):
-            if link_alive[k]:
-                a, b = links[k, 0], links[k, 1]
-                if not (active[a] and active[b] and key[a] == key[b]):
-                    link_alive[k] = False
-        comp[:] = -1
+        kept = 0
+        for q in range(n_live):
+            k = live[q]
+            a, b = links[k, 0], links[k, 1]
+            if active[a] and active[b] and key[a] == key[b]:
+                live[kept] = k
+                kept += 1
+            else:
+                link_alive[k] = False
+        n_live = kept
+        for p in range(n_points):
+            comp[points[p]] = -1
         n = 0
-        for s in range(m):
-            if not active[s] or comp[s] >= 0:
+        for p in range(n_points):
+            s = points[p]
+            if comp[s] >= 0:
                 continue
             comp[s] = n
             top = 1
@@ -74,24 +85,24 @@ def straight_chain_labels(xy, mag, pixel, links, max_residual_px, rounds, min_le
             n += 1
         # weighted TLS line per component, summed in index order
         sw, sx, sy = np.zeros(n), np.zeros(n), np.zeros(n)
-        for i in range(m):
+        for p in range(n_points):
+            i = points[p]
             c = comp[i]
-            if c >= 0:
-                sw[c] += mag[i]
-                sx[c] += mag[i] * xy[i, 0]
-                sy[c] += mag[i] * xy[i, 1]
+            sw[c] += mag[i]
+            sx[c] += mag[i] * xy[i, 0]
+            sy[c] += mag[i] * xy[i, 1]
         mx, my = np.empty(n), np.empty(n)
         for c in range(n):
             safe = sw[c] if sw[c] > 0 else 1.0
             mx[c], my[c] = sx[c] / safe, sy[c] / safe
         sxx, syy, sxy = np.zeros(n), np.zeros(n), np.zeros(n)
-        for i in range(m):
+        for p in range(n_points):
+            i = points[p]
             c = comp[i]
-            if c >= 0:
-                dx, dy = xy[i, 0] - mx[c], xy[i, 1] - my[c]
-                sxx[c] += mag[i] * dx * dx
-                syy[c] += mag[i] * dy * dy
-                sxy[c] += mag[i] * dx * dy
+            dx, dy = xy[i, 0] - mx[c], xy[i, 1] - my[c]
+            sxx[c] += mag[i] * dx * dx
+            syy[c] += mag[i] * dy * dy
+            sxy[c] += mag[i] * dx * dy
         ux, uy = np.empty(n), np.empty(n)
         for c in range(n):
             angle = 0.5 * np.arctan2(2 * sxy[c], sxx[c] - syy[c])
@@ -100,10 +111,9 @@ def straight_chain_labels(xy, mag, pixel, links, max_residual_px, rounds, min_le
         t = np.empty(m)
         first = np.full(n, -1, np.int64)
         last = np.full(n, -1, np.int64)
-        for i in range(m):
+        for p in range(n_points):
+            i = points[p]
             c = comp[i]
-            if c < 0:
-                continue
             t[i] = (xy[i, 0] - mx[c]) * ux[c] + (xy[i, 1] - my[c]) * uy[c]
             if first[c] < 0 or t[i] < t[first[c]]:
                 first[c] = i
@@ -118,10 +128,9 @@ def straight_chain_labels(xy, mag, pixel, links, max_residual_px, rounds, min_le
         # the farthest point from the chord (ties: the first along the line, then the lower index)
         worst = np.full(n, -1, np.int64)
         worst_across = np.full(n, -1.0)
-        for i in range(m):
+        for p in range(n_points):
+            i = points[p]
             c = comp[i]
-            if c < 0:
-                continue
             rx, ry = xy[i, 0] - xy[first[c], 0], xy[i, 1] - xy[first[c], 1]
             across = abs(rx * cy[c] - ry * cx[c])
             j = worst[c]
@@ -138,10 +147,9 @@ def straight_chain_labels(xy, mag, pixel, links, max_residual_px, rounds, min_le
                 rank[c] = n_final
                 n_final += 1
         left = 0
-        for i in range(m):
+        for p in range(n_points):
+            i = points[p]
             c = comp[i]
-            if c < 0:
-                continue
             if not bent[c]:
                 labels[i] = rank[c]
                 active[i] = False
@@ -151,7 +159,9 @@ def straight_chain_labels(xy, mag, pixel, links, max_residual_px, rounds, min_le
                 active[i] = False          # the cut point and its 8-neighbours: a corner's own pixels
                 continue
             key[i] = c * 2 + (1 if t[i] > t[j] else 0)
+            points[left] = i           # still active: the next round's points, ascending
             left += 1
+        n_points = left
         if not any_bent or left == 0:
             break
     return labels

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from typing import Iterable, Iterator
 
 import numpy as np
+import orjson
 
 from .atomic import opened
 from .errors import FileFormatError
@@ -69,13 +70,15 @@ def _finite(value):
 def dumps(obj, indent: int | None = None) -> str:
     """Strict JSON of ``obj`` (dicts, lists, numbers, numpy scalars and arrays): NaN and
     +-inf become ``null``, never the bare ``NaN``/``Infinity`` that JSON parsers reject.
-    Compact separators unless ``indent`` is given."""
-    separators = (",", ":") if indent is None else None
+    Compact separators unless ``indent`` is given. Compact JSON comes from orjson (floats in the
+    same shortest round-trip digits as Python's, exponents without padding: 1e-7, not 1e-07):
+    the frames file of ``accum extract`` spent a tenth of the run in ``json.dumps``."""
+    if indent is None:
+        return orjson.dumps(obj, default=_json_default, option=orjson.OPT_SERIALIZE_NUMPY).decode("utf-8")
     try:
-        return json.dumps(obj, indent=indent, separators=separators, allow_nan=False, default=_json_default)
+        return json.dumps(obj, indent=indent, allow_nan=False, default=_json_default)
     except ValueError:  # a non-finite float somewhere
-        return json.dumps(_finite(obj), indent=indent, separators=separators, allow_nan=False,
-                          default=_json_default)
+        return json.dumps(_finite(obj), indent=indent, allow_nan=False, default=_json_default)
 
 
 def write_json(target, obj, indent: int | None = None) -> None:

@@ -2,7 +2,7 @@
 reading the same recording, one thread, versus ``extract_recording``, ``accumulate_recording`` and
 ``track_recording`` (one worker, then two for extraction and accumulation, on the sample and on the
 60 frames of the tracking recording: the helper process needs about a second to start). The machine's speed
-drifts: SGBM and the one-worker runs alternate three times (A B A B) and each ratio is taken against
+drifts: SGBM and the one-worker runs alternate five times (A B A B) and each ratio is taken against
 the SGBM run just before it; the median is printed with the range. The library's compiled
 kernels are loaded once before (numba's cache, about 0.4 s per process, which a long recording
 amortizes); worker processes load them in the run they belong to.
@@ -53,7 +53,7 @@ model = accumulate_recording({track_path!r}, frames=FrameRange(0, 20)).model
 track_recording(model, {track_path!r}, frames=FrameRange(0, 2))       # the tracker's kernels loaded once
 RESULT['track'] = track_recording(model, {track_path!r}).frames_per_second
 """
-ROUNDS = 3
+ROUNDS = 5
 
 
 def main() -> dict:
