@@ -244,6 +244,10 @@ def cal_edit(field, value, side="right"):
     ("D", [0.01] * 11, r"right calibration: D has 11 coefficients \(expected 0, 4, 5, 8, 12, 14\)"),
     ("K", [np.nan] + [0.0] * 8, r"right calibration: K holds NaN or infinite values"),
     ("P", [150.0, 0, 80, -12, 0, np.inf, 60, 0, 0, 0, 1, 0], r"right calibration: P holds NaN or infinite"),
+    ("R", [0.0] * 9, r"right calibration: R is not a rotation \(R R\^T = I, det \+1\), so the images cannot be"),
+    ("R", [1.0, 0, 0, 0, 1, 0, 0, 0, -1], r"right calibration: R is not a rotation"),
+    ("K", [150.0, 0, 80, 0, 150, 60, 0, 0, 0], r"right calibration: K \(its 3x3 part\) is singular"),
+    ("P", [150.0, 0, 80, -12, 0, 150, 60, 0, 0, 0, 0, 0], r"right calibration: P \(its 3x3 part\) is singular"),
 ])
 def test_calibration_checked_before_any_table(tmp_path, field, value, message):
     path = fuzz.build(tmp_path / "r.mcap", cal_edit=cal_edit(field, value), raw=True)
