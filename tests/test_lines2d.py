@@ -415,3 +415,27 @@ def test_line_order_is_numpys_lexsort_with_its_ties():
         polarity = rng.choice([-1, 1], n)
         t = np.round(rng.normal(0, 30, n))               # whole numbers: many ties within a line
         assert np.array_equal(line_order(labels, polarity, t), np.lexsort((t, polarity, labels)))
+
+
+def test_refine_on_gradient_moves_a_segment_onto_a_slanted_step_edge():
+    from scipy.special import erf
+
+    from accumcli.lines2d import Gradients, Segments2D, refine_on_gradient
+
+    angle = np.radians(30.0)                                     # the edge's direction
+    direction, normal = np.array([np.cos(angle), np.sin(angle)]), np.array([-np.sin(angle), np.cos(angle)])
+    point = np.array([80.3, 60.7])
+    v, u = np.mgrid[0:120, 0:160].astype(float)
+    across = (u - point[0]) * normal[0] + (v - point[1]) * normal[1]
+    image = np.clip(np.round(60 + 50 * (1 + erf(across / np.sqrt(2)))), 0, 255).astype(np.uint8)
+    grad = Gradients.of(image)
+    turned = np.radians(31.0)                                   # 0.6 px across and 1 deg off
+    start = Segments2D(centers=np.array([point + 0.6 * normal]), directions=np.array([[np.cos(turned), np.sin(turned)]]),
+                       lengths=np.array([20.0]), polarity=np.array([1], np.int8), contrast=np.array([20.0]),
+                       line_id=np.array([0]), t=np.array([0.0]), line_direction=np.array([direction]))
+    refined = refine_on_gradient(start, grad.magnitude)
+    assert abs((refined.centers[0] - point) @ normal) < 0.1      # on the edge within 0.1 px
+    assert np.degrees(np.arccos(min(1.0, abs(refined.directions[0] @ direction)))) < 0.3
+    # a cut that would move it more than 1 px keeps the segment where it was
+    far = Segments2D(**{**start.__dict__, "centers": np.array([point + 1.6 * normal])})
+    assert np.array_equal(refine_on_gradient(far, grad.magnitude).centers, far.centers)
