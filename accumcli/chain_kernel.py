@@ -178,6 +178,9 @@ def neighbour_links(pixel, g, mag, height, width, cos_max):  # pragma: no cover
     index = np.full((height + 2, width + 2), -1, np.int32)     # padded: border neighbours are -1
     for i in range(m):
         index[pixel[i, 0] + 1, pixel[i, 1] + 1] = i
+    ux, uy = np.empty(m), np.empty(m)          # the unit gradients, each division once
+    for i in range(m):
+        ux[i], uy[i] = g[i, 0] / mag[i], g[i, 1] / mag[i]
     links = np.empty((4 * m, 2), np.int64)
     found = 0
     for dr, dc in ((0, 1), (1, -1), (1, 0), (1, 1)):
@@ -185,7 +188,7 @@ def neighbour_links(pixel, g, mag, height, width, cos_max):  # pragma: no cover
             j = index[pixel[i, 0] + 1 + dr, pixel[i, 1] + 1 + dc]
             if j < 0:
                 continue
-            if (g[i, 0] / mag[i]) * (g[j, 0] / mag[j]) + (g[i, 1] / mag[i]) * (g[j, 1] / mag[j]) >= cos_max:
+            if ux[i] * ux[j] + uy[i] * uy[j] >= cos_max:
                 links[found, 0], links[found, 1] = i, j
                 found += 1
     return links[:found].copy()
