@@ -419,11 +419,13 @@ def local_segments(points: EdgePoints, labels: np.ndarray, params: LineParams,
     count_run = np.bincount(run, minlength=n_runs)
     fill = count_run / ((t_hi - t_lo + 1.0) * np.max(np.abs(line_dir[run_line]), axis=1))
     support = t_hi - t_lo + 1.0
-    t_lo, t_hi = _complete_junctions(t_lo, t_hi, line_center[run_line], line_dir[run_line], run_line, params)
+    # a run without the fill or the support gives no piece whatever it grows: its growth is not needed
+    needed = (fill >= params.min_fill) & (support >= min_support_px)
+    t_lo, t_hi = _complete_junctions(t_lo, t_hi, line_center[run_line], line_dir[run_line], run_line, needed, params)
     run_length = t_hi - t_lo + 1.0
     # Canny and the vote lose a pixel or two where edges meet: let the pieces reach past the run's ends
     t_lo, run_length = t_lo - params.end_extension_px, run_length + 2 * params.end_extension_px
-    long_enough = (run_length >= params.min_fill * L) & (fill >= params.min_fill) & (support >= min_support_px)
+    long_enough = (run_length >= params.min_fill * L) & needed
     pieces = np.where(long_enough, np.ceil(run_length / L), 0).astype(np.int64)
     # piece centres evenly from the run's first to its last pixel (overlapping slightly when needed)
     if adapt_length:   # pieces of equal length tiling the run
@@ -506,13 +508,14 @@ def refine_on_gradient(segments: Segments2D, magnitude: np.ndarray, profiles: in
 JUNCTION_MIN_DEG = 20.0     # lines closer in direction than this do not meet at a corner
 
 
-def _complete_junctions(t_lo, t_hi, centers, directions, line, params: LineParams):
+def _complete_junctions(t_lo, t_hi, centers, directions, line, needed, params: LineParams):
     """Extend runs whose ends meet another line's run end at a corner.
 
     Near a junction the gradient belongs to two edges, so Canny and the votes
     lose the last pixels of each. Where the ends of two runs on different lines, more than
     ``JUNCTION_MIN_DEG`` apart in direction, lie within ``junction_radius_px`` of the lines'
-    intersection, both runs are extended to it. Returns new (t_lo, t_hi).
+    intersection, both runs are extended to it. Returns new (t_lo, t_hi), exact for the ``needed``
+    (N,) runs (``pair_kernel.junction_growth``).
     """
     radius = params.junction_radius_px
     ends = np.concatenate([centers + t_lo[:, None] * directions, centers + t_hi[:, None] * directions])
@@ -520,7 +523,8 @@ def _complete_junctions(t_lo, t_hi, centers, directions, line, params: LineParam
     outward = np.concatenate([-directions, directions])
     contiguous = np.ascontiguousarray
     grow = junction_growth(contiguous(ends, np.float64), contiguous(outward, np.float64), contiguous(centers, np.float64),
-                           contiguous(directions, np.float64), contiguous(line, np.int64), float(2 * radius), float(radius),
+                           contiguous(directions, np.float64), contiguous(line, np.int64), contiguous(needed, np.bool_),
+                           float(2 * radius), float(radius),
                            float(np.sin(np.radians(JUNCTION_MIN_DEG))), JUNCTION_MIN_DEG)
     return t_lo - grow[:n], t_hi + grow[n:]
 
