@@ -56,12 +56,17 @@ def row_ncc(left_img, right_img, row, column, d_lo, d_hi, w):  # pragma: no cove
                 column_sum[x] += b[y, x]
                 column_square[x] += b[y, x] * b[y, x]
         energy_a = float(square_a) * n - float(sum_a) ** 2
-        for s in range(shifts):
-            sum_b = np.int64(0)
-            square_b = np.int64(0)
-            for x in range(s, s + h):
-                sum_b += column_sum[x]
-                square_b += column_square[x]
+        sum_b = np.int64(0)
+        square_b = np.int64(0)
+        for x in range(h - 1):
+            sum_b += column_sum[x]
+            square_b += column_square[x]
+        for s in range(shifts):          # the window's sums slide along the strip (exact integers)
+            sum_b += column_sum[s + h - 1]
+            square_b += column_square[s + h - 1]
+            if s > 0:
+                sum_b -= column_sum[s - 1]
+                square_b -= column_square[s - 1]
             c = float(cross[s]) * n - float(sum_a) * float(sum_b)
             energy_b = float(square_b) * n - float(sum_b) ** 2
             denominator = np.sqrt(max(energy_b, 0.0) * energy_a)
