@@ -50,7 +50,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .ncc_kernel import row_ncc
+from .ncc_kernel import ends_on_lines, row_ncc
 from .lines2d import Gradients, Segments2D, parabola_peak, sample
 from .recording import StereoIntrinsics
 from .segments import Segments
@@ -203,18 +203,11 @@ def triangulate_critical(left_img: np.ndarray, right_img: np.ndarray, left: Segm
         return none
     ends, disparity, end_ref = ends[trusted], disparity[trusted], end_ref[trusted]
     # each critical segment's nearest trusted end on either side on its line (parallel; either polarity)
-    direction = left.line_direction[critical]
-    rel = ends[None, :, :] - left.centers[critical, None, :]                       # (K, E, 2)
-    along = np.einsum("kec,kc->ke", rel, direction)
-    across = np.abs(rel[..., 0] * direction[:, None, 1] - rel[..., 1] * direction[:, None, 0])
-    parallel = np.abs(np.einsum("kc,ec->ke", direction, left.line_direction[end_ref])) >= np.cos(np.radians(3.0))
-    on_line = (across <= params.end_across_px) & parallel
-    half_length = left.lengths[critical, None] / 2
-    before = np.where(on_line & (along <= -half_length + params.end_gap_px), along, -np.inf)
-    after = np.where(on_line & (along >= half_length - params.end_gap_px), along, np.inf)
-    e0, e1 = np.argmax(before, axis=1), np.argmin(after, axis=1)
-    t0 = before[np.arange(len(critical)), e0]                      # the ends, along the segment's line
-    span = after[np.arange(len(critical)), e1] - t0
+    e0, e1, t0, t1 = ends_on_lines(*(np.ascontiguousarray(a, np.float64) for a in (
+        ends, left.centers[critical], left.line_direction[critical], left.line_direction[end_ref],
+        left.lengths[critical] / 2)), float(params.end_across_px), float(params.end_gap_px),
+        float(np.cos(np.radians(3.0))))
+    span = t1 - t0                                                 # t0, t1: the ends along the segment's line
     # depth ratio of the two ends (disparity ratio): an edge behind an occluding contour ends there,
     # and the window at that end matches the occluder, much nearer than the edge's other end
     ratio = np.maximum(disparity[e0], disparity[e1]) / np.minimum(disparity[e0], disparity[e1])
@@ -235,7 +228,8 @@ def triangulate_critical(left_img: np.ndarray, right_img: np.ndarray, left: Segm
     # the left image shows the edge all the way between the two ends, the right one where predicted
     s = np.linspace(0.0, 1.0, 24)[None, :, None]
     path = ends[e0[rows]][:, None, :] + s * (ends[e1[rows]] - ends[e0[rows]])[:, None, :]     # (K, S, 2)
-    normal = np.column_stack([-direction[rows, 1], direction[rows, 0]])
+    line_direction = left.line_direction[critical[rows]]
+    normal = np.column_stack([-line_direction[:, 1], line_direction[:, 0]])
     d_path = disparity[e0[rows]][:, None] + s[..., 0] * (disparity[e1[rows]] - disparity[e0[rows]])[:, None]
     right_path = np.stack([path[..., 0] - d_path, path[..., 1]], axis=-1)
     rows = rows[(_shown(grads[0], path, normal) >= params.end_continuity)

@@ -72,3 +72,30 @@ def row_ncc(left_img, right_img, row, column, d_lo, d_hi, w):  # pragma: no cove
             denominator = np.sqrt(max(energy_b, 0.0) * energy_a)
             ncc[m, s] = c / max(denominator, 1.0) if denominator > 0 else 0.0
     return ncc
+
+
+@kernel
+def ends_on_lines(ends, centers, direction, end_direction, half_length, across_px, gap_px, cos_parallel):  # pragma: no cover
+    """For K segments (``centers``, unit ``direction`` (K, 2), ``half_length`` (K,) px) the nearest of
+    the E run ends (``ends``, their lines' ``end_direction`` (E, 2)) on the segment's line (within
+    ``across_px`` of it, parallel: |cos| at least ``cos_parallel``) before it and after it (beyond
+    -half_length + ``gap_px`` and half_length - ``gap_px`` along it): (K,) index of each (0 where
+    there is none, as numpy's argmax of all -inf gives) and (K,) its place along the line (-inf, inf
+    where there is none). One pass over the K x E pairs instead of (K, E) arrays."""
+    k_count = len(centers)
+    e0, e1 = np.zeros(k_count, np.int64), np.zeros(k_count, np.int64)
+    t0, t1 = np.full(k_count, -np.inf), np.full(k_count, np.inf)
+    for k in range(k_count):
+        dx, dy = direction[k, 0], direction[k, 1]
+        for e in range(len(ends)):
+            rx, ry = ends[e, 0] - centers[k, 0], ends[e, 1] - centers[k, 1]
+            if not abs(rx * dy - ry * dx) <= across_px:
+                continue
+            if not abs(dx * end_direction[e, 0] + dy * end_direction[e, 1]) >= cos_parallel:
+                continue
+            along = rx * dx + ry * dy
+            if along <= -half_length[k] + gap_px and along > t0[k]:
+                t0[k], e0[k] = along, e
+            if along >= half_length[k] - gap_px and along < t1[k]:
+                t1[k], e1[k] = along, e
+    return e0, e1, t0, t1

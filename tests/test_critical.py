@@ -85,3 +85,18 @@ def test_row_ncc_is_the_normalized_cross_correlation_of_each_shift():
         assert 20 - np.argmax(ncc[m]) == 9 and ncc[m].max() == pytest.approx(1.0)
     flat = row_ncc(np.full((20, 20), 7, np.uint8), right[:20, :20], np.array([10]), np.array([15]), 1, 8, 2)
     assert (flat == 0).all()
+
+
+def test_ends_on_lines_finds_the_nearest_parallel_end_on_either_side():
+    from accumcli.ncc_kernel import ends_on_lines
+
+    # a segment along x at the origin, 10 px long; ends at x = -20, -9, 12, 30 on its line, one at
+    # x = -7 beside it (3 px across), one at x = 8 on a crossing line, one at x = 1 inside the segment (within gap_px of its ends counts as beyond them)
+    ends = np.array([[-20.0, 0.0], [-9.0, 0.5], [12.0, 0.0], [30.0, 0.0], [-7.0, 3.0], [8.0, 0.0], [1.0, 0.0]])
+    end_direction = np.array([[1.0, 0.0]] * 4 + [[1.0, 0.0], [0.0, 1.0], [1.0, 0.0]])
+    e0, e1, t0, t1 = ends_on_lines(ends, np.zeros((1, 2)), np.array([[1.0, 0.0]]), end_direction, np.array([5.0]),
+                                   1.5, 3.0, np.cos(np.radians(3.0)))
+    assert (e0[0], e1[0], t0[0], t1[0]) == (1, 2, -9.0, 12.0)
+    none = ends_on_lines(ends[:1], np.zeros((1, 2)), np.array([[0.0, 1.0]]), end_direction[:1], np.array([5.0]),
+                         1.5, 3.0, np.cos(np.radians(3.0)))
+    assert (none[0][0], none[1][0], none[2][0], none[3][0]) == (0, 0, -np.inf, np.inf)
