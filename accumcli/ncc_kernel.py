@@ -1,5 +1,7 @@
-"""The compiled normalized cross-correlation of ``critical._block_match`` (numba, installed as a
-wheel).
+"""The compiled loops of ``critical`` (numba, installed as a wheel): the normalized
+cross-correlation of ``_block_match`` and the run ends on each critical segment's line
+(``ends_on_lines``, one pass over the pairs where numpy built five (K, E) arrays: 4.5 ms a frame on
+the teabox).
 
 Why compiled: numpy needed (M, h, h) and (M, h, D + 2w) float copies of the windows and strips and
 a batched product per window column, a quarter of the extraction time spent on a few hundred run
