@@ -13,6 +13,8 @@ lower index (as the stable ``np.lexsort`` orders them).
 from __future__ import annotations
 
 import numpy as np
+
+from .group_kernel import group_moments
 from .jit import kernel
 
 
@@ -84,25 +86,9 @@ def straight_chain_labels(xy, mag, pixel, links, max_residual_px, rounds, min_le
                         top += 1
             n += 1
         # weighted TLS line per component, summed in index order
-        sw, sx, sy = np.zeros(n), np.zeros(n), np.zeros(n)
-        for p in range(n_points):
-            i = points[p]
-            c = comp[i]
-            sw[c] += mag[i]
-            sx[c] += mag[i] * xy[i, 0]
-            sy[c] += mag[i] * xy[i, 1]
-        mx, my = np.empty(n), np.empty(n)
-        for c in range(n):
-            safe = sw[c] if sw[c] > 0 else 1.0
-            mx[c], my[c] = sx[c] / safe, sy[c] / safe
-        sxx, syy, sxy = np.zeros(n), np.zeros(n), np.zeros(n)
-        for p in range(n_points):
-            i = points[p]
-            c = comp[i]
-            dx, dy = xy[i, 0] - mx[c], xy[i, 1] - my[c]
-            sxx[c] += mag[i] * dx * dx
-            syy[c] += mag[i] * dy * dy
-            sxy[c] += mag[i] * dx * dy
+        active_points = points[:n_points]
+        _, mx, my, sxx, syy, sxy = group_moments(comp[active_points], n, xy[active_points, 0], xy[active_points, 1],
+                                                 mag[active_points])
         ux, uy = np.empty(n), np.empty(n)
         for c in range(n):
             angle = 0.5 * np.arctan2(2 * sxy[c], sxx[c] - syy[c])

@@ -37,7 +37,7 @@ from __future__ import annotations
 import numpy as np
 
 from .chain_kernel import neighbour_links, straight_chain_labels
-from .group_kernel import line_coordinates, link_components
+from .group_kernel import link_components
 from .grouping import group_range
 from .pair_kernel import collinear_links
 from .lines2d import (EdgePoints, Gradients, LineParams, Segments2D, StageTimes, _canonical, _weighted_line_fit, dot2,
@@ -92,8 +92,7 @@ def collinear_lines(points: EdgePoints, chains: np.ndarray, reach_px: float, max
     lab, xy = chains[on].astype(np.int64), points.xy[on]
     n = int(lab.max()) + 1
     _, center, direction = _weighted_line_fit(lab, n, xy, points.mag[on])
-    t = line_coordinates(np.ascontiguousarray(xy, np.float64), np.ascontiguousarray(points.g[on], np.float64), lab,
-                         center, direction)[0]
+    t = dot2(xy - center[lab], direction[lab])
     t_lo, t_hi = group_range(lab, n, t)
     ends = np.concatenate([center + t_lo[:, None] * direction, center + t_hi[:, None] * direction])
     normal = np.column_stack([-direction[:, 1], direction[:, 0]])

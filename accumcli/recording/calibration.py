@@ -115,10 +115,10 @@ def check_calibration(cal: CameraCalibration, side: str) -> None:
             raise RecordingError(f"{side} calibration: {name} holds NaN or infinite values")
     if cal.P[0, 0] <= 0 or cal.P[1, 1] <= 0:
         raise RecordingError(f"{side} calibration: P has no positive focal length (uncalibrated camera)")
-    if not cal.is_rectified and (cal.K[0, 0] <= 0 or cal.K[1, 1] <= 0):
-        raise RecordingError(f"{side} calibration: K has no positive focal length (uncalibrated camera)")
     if not cal.is_rectified:
-        # rectification inverts P[:, :3] R (OpenCV 5 raises on a singular one, 4 made an empty map)
+        if cal.K[0, 0] <= 0 or cal.K[1, 1] <= 0:
+            raise RecordingError(f"{side} calibration: K has no positive focal length (uncalibrated camera)")
+        # rectification inverts P[:, :3] R (OpenCV 5.1 raises on a singular one, a traceback)
         with np.errstate(all="ignore"):     # huge entries overflow: then they fail the tests
             rotation = np.allclose(cal.R @ cal.R.T, np.eye(3), atol=1e-3) and np.linalg.det(cal.R) > 0
             singular = [name for name, m in (("P", cal.P[:, :3]), ("K", cal.K)) if not np.linalg.cond(m) < 1e12]

@@ -86,28 +86,25 @@ def extracted_frames(frames: Iterable[StereoFrame], params: ExtractParams, camer
     helpers = workers - 1
     with ProcessPoolExecutor(helpers, mp_context=context, initializer=_one_thread) as pool:
         ready = [pool.submit(_ready) for _ in range(helpers)]
-        pending: collections.deque = collections.deque()    # (frame, future or finished extraction)
+        pending: collections.deque = collections.deque()    # (frame, future of its extraction)
         for frame in frames:
-            queued = sum(isinstance(work, Future) and not work.done() for _, work in pending)
+            queued = sum(not work.done() for _, work in pending)
             if all(r.done() for r in ready) and queued < 2 * helpers:
                 pending.append((frame, pool.submit(_extract, frame, params, camera_frame)))
             else:                      # the helpers are starting or busy: this process takes it
-                pending.append((frame, (extract_frame(frame, params, camera_frame, times), None)))
-            while pending and (len(pending) > 2 * workers or _finished(pending[0][1])):
+                done: Future = Future()
+                done.set_result((extract_frame(frame, params, camera_frame, times), {}))   # its times added
+                pending.append((frame, done))
+            while pending and (len(pending) > 2 * workers or pending[0][1].done()):
                 yield _collect(pending.popleft(), times)
         while pending:
             yield _collect(pending.popleft(), times)
 
 
-def _finished(work) -> bool:
-    return not isinstance(work, Future) or work.done()
-
-
 def _collect(item, times: StageTimes) -> tuple[StereoFrame, FrameSegments]:
-    """(frame, extraction) of a pending item, its helper's stage times added to ``times`` (this
-    process's own extractions added theirs already)."""
-    frame, work = item
-    extraction, seconds = work.result() if isinstance(work, Future) else work
-    for stage, value in (seconds or {}).items():
+    """(frame, extraction) of a pending item, the stage times of a helper's added to ``times``."""
+    frame, future = item
+    extraction, seconds = future.result()
+    for stage, value in seconds.items():
         times.seconds[stage] = times.seconds.get(stage, 0.0) + value
     return frame, extraction
