@@ -52,9 +52,11 @@ def extract_frame(frame: StereoFrame, params: ExtractParams = ExtractParams(), c
     times = times or StageTimes()
     detect = DETECTORS[params.lines.detector]
     sides, grads = [], []
+    border = frame.border_distance or (None, None)
     for side, image in enumerate((frame.left, frame.right)):
         t0 = time.perf_counter()
-        grad = Gradients.of(image, params.lines, gradients[side] if gradients is not None else None)
+        grad = Gradients.of(image, params.lines, gradients[side] if gradients is not None else None,
+                            border[side])
         times.add("gradients", t0)
         sides.append(detect(image, params.lines, grad, times))
         grads.append(grad)

@@ -41,7 +41,8 @@ long-lived segment still follows new evidence.
 
 ``expected`` (beyond the paper): a model segment should be seen in a frame only
 if both its endpoints are in view (``visibility.segments_in_both_images``: in
-front of the camera and ``IMAGE_MARGIN_PX`` inside both images), it
+front of the camera, ``IMAGE_MARGIN_PX`` inside both images and clear of the black wedges that
+rectification of raw images leaves, where nothing can be seen), it
 is not near the critical plane, and the camera looks at it from within
 ``aspect_margin_deg`` of a direction it was confirmed from. For a rigid object and
 gripper, what is visible depends on the viewing direction only, so a segment
@@ -79,10 +80,12 @@ class LineModelParams:
 @dataclass
 class FrameContext:
     """What the entity type needs to know of the frame: the pose used, T_camera_object (4, 4)
-    (checked: ``InputError`` if not a rigid transform), and the cameras."""
+    (checked: ``InputError`` if not a rigid transform), the cameras, and the frame's
+    ``border_distance`` (``StereoFrame``: where rectification left no image; None: none)."""
 
     T_camera_object: np.ndarray
     intrinsics: StereoIntrinsics
+    border_distance: tuple[np.ndarray, np.ndarray] | None = None
 
     def __post_init__(self):
         self.T_camera_object = check_transform(self.T_camera_object, "T_camera_object")
@@ -233,7 +236,7 @@ class LineSegmentType:
         """(N,) bool: the frame should have shown these model segments (see the module docstring)."""
         p, intr = self.params, context.intrinsics
         T = context.T_camera_object
-        inside = segments_in_both_images(model, T, intr)
+        inside = segments_in_both_images(model, T, intr, border_distance=context.border_distance)
         uv_left = intr.project(transform_points(T, model.endpoints().reshape(-1, 3)))[0]
         d2 = (uv_left[1::2] - uv_left[0::2])
         angle = np.degrees(np.arctan2(np.abs(d2[:, 1]), np.abs(d2[:, 0])))

@@ -135,11 +135,14 @@ class Gradients:
 
     @classmethod
     def of(cls, image: np.ndarray, params: "LineParams | None" = None,
-           reuse: "Gradients | None" = None) -> "Gradients":
+           reuse: "Gradients | None" = None, border_distance: "np.ndarray | None" = None) -> "Gradients":
         """Gradients of an (H, W) uint8 image with ``params``' blur, Canny threshold and tensor
         smoothing (``LineParams()`` when None). ``reuse``: gradients already computed for this
         image; returned as they are if made with the same parameters, their gx, gy shared if only
-        the threshold or the tensor smoothing differ, ignored if the blur does."""
+        the threshold or the tensor smoothing differ, ignored if the blur does. ``border_distance``:
+        (H, W) uint8, px from pixels that hold no image (``StereoFrame.border_distance``); the
+        gradients are zero wherever the blur (3 sigma) and the Sobel (1 px) reach such a pixel, so
+        that the border of a rectification's black wedge is no edge for extraction nor tracking."""
         params = params or LineParams()
         if reuse is not None and reuse.blur_sigma == params.blur_sigma:
             if (reuse.gradient_threshold, reuse.tensor_sigma) == (params.gradient_threshold, params.tensor_sigma):
@@ -150,6 +153,9 @@ class Gradients:
         # Sobel of 8-bit grey levels is an integer (|.| <= 1020): int16 holds it for Canny, and
         # float32 / 8 exactly
         dx, dy = cv2.Sobel(blurred, cv2.CV_16S, 1, 0, ksize=3), cv2.Sobel(blurred, cv2.CV_16S, 0, 1, ksize=3)
+        if border_distance is not None:
+            reached = border_distance <= np.ceil(3 * params.blur_sigma) + 1
+            dx[reached], dy[reached] = 0, 0
         gx, gy = dx * np.float32(0.125), dy * np.float32(0.125)
         return cls(gx, gy, params.blur_sigma, params.gradient_threshold, params.tensor_sigma, (dx, dy))
 
@@ -193,8 +199,11 @@ class Gradients:
 
 def frame_gradients(frame, params: "LineParams | None" = None) -> tuple[Gradients, Gradients]:
     """(left, right) ``Gradients`` of a rectified stereo frame (anything with ``left`` and ``right``
-    (H, W) uint8 images), for extraction and tracking in that frame to share."""
-    return Gradients.of(frame.left, params), Gradients.of(frame.right, params)
+    (H, W) uint8 images, and optionally ``border_distance`` as ``StereoFrame`` has), for extraction
+    and tracking in that frame to share."""
+    border = getattr(frame, "border_distance", None) or (None, None)
+    return (Gradients.of(frame.left, params, border_distance=border[0]),
+            Gradients.of(frame.right, params, border_distance=border[1]))
 
 
 def parabola_peak(m_minus: np.ndarray, m_center: np.ndarray, m_plus: np.ndarray) -> np.ndarray:

@@ -97,7 +97,7 @@ class LineAccumulation:
             T_camera_object = T_corrected
         elif self.params.motion == "tracked":
             T_camera_object, estimate = self._refined(frame, T_camera_object, extraction)
-        context = FrameContext(T_camera_object, frame.intrinsics)
+        context = FrameContext(T_camera_object, frame.intrinsics, frame.border_distance)
         stats = self.core.update(extraction.segments, invert(T_camera_object), context)
         log.debug("frame %d: %s", frame.index, ", ".join(f"{k} {v}" for k, v in stats.__dict__.items()))
         return AccumulationStep(frame, extraction, T_camera_object, stats, estimate)

@@ -198,3 +198,33 @@ def test_writer_is_atomic(tmp_path):
             w.image("/stereo/left/image", helpers.image(0), 0, "camera_left")
             raise RuntimeError("interrupted")
     assert not target.exists() and not list(tmp_path.iterdir())
+
+
+def test_rectification_wedges_give_no_segments(raw_recording):
+    """Raw images rectified leave black wedges; their borders are edges of no object. With the
+    frame's ``border_distance`` no 2D segment runs along a wedge (half of it or more within 6 px;
+    real edges may end at one); without it, over a hundred do."""
+    import dataclasses
+
+    from accumcli.extract import extract_frame
+
+    def near_wedge(extraction, border):
+        count = 0
+        for side, segments in enumerate((extraction.left, extraction.right)):
+            ends = segments.endpoints().reshape(-1, 2, 2)
+            samples = ends[:, :1] + np.linspace(0, 1, 9)[None, :, None] * (ends[:, 1:] - ends[:, :1])
+            px = np.clip(np.rint(samples), 0, [border[side].shape[1] - 1, border[side].shape[0] - 1]).astype(int)
+            count += int(((border[side][px[..., 1], px[..., 0]] <= 6).mean(axis=1) >= 0.5).sum())
+        return count
+
+    with Recording(raw_recording) as rec:
+        frame = next(rec.frames())
+    assert frame.border_distance is not None
+    assert all(0.005 < (b == 0).mean() < 0.2 for b in frame.border_distance)   # wedges on both sides
+    assert near_wedge(extract_frame(frame), frame.border_distance) == 0
+    assert near_wedge(extract_frame(dataclasses.replace(frame, border_distance=None)), frame.border_distance) >= 60
+
+
+def test_rectified_input_has_no_wedges(small_recording):
+    with Recording(small_recording) as rec:
+        assert next(rec.frames()).border_distance is None

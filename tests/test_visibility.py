@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from accumcli.geometry import make_transform
 from accumcli.line_model import FrameContext, LineSegmentType
 from accumcli.segments import Segments
 from accumcli.track import visible
-from accumcli.visibility import IMAGE_MARGIN_PX, MIN_DEPTH_M, in_both_images, segments_in_both_images
+from accumcli.visibility import IMAGE_MARGIN_PX, MIN_DEPTH_M, WEDGE_MARGIN_PX, in_both_images, segments_in_both_images
 
 from .scenes import INTRINSICS as INTR  # 320 x 240, fx 600, baseline 0.08 m
 
@@ -67,3 +68,28 @@ def test_accumulation_and_tracking_agree_on_the_margin():
     assert not visible(segment, np.eye(4), INTR, 25.0)[0]
     inside = make_transform(np.eye(3), [0.0, 0.002, 0.0])             # 1.2 px lower: in for both
     assert kind.expected(model, FrameContext(inside, INTR))[0] and visible(segment, inside, INTR, 25.0)[0]
+
+
+def test_a_rectification_wedge_is_out_of_view():
+    """Pixels near a black wedge that rectification left (``border_distance``) are not in view: a
+    wedge over the left image's right third, and one over the right image's top rows."""
+    left, right = np.full((INTR.height, INTR.width), 255, np.uint8), np.full((INTR.height, INTR.width), 255, np.uint8)
+    left[:, 220:], right[:30, :] = 0, 0
+    border = tuple(np.minimum(cv2.distanceTransform((b > 0).view(np.uint8), cv2.DIST_C, 3), 255).astype(np.uint8)
+                   for b in (left, right))
+    u_mid, v_mid = INTR.cx + DISPARITY / 2, INTR.cy
+    assert in_both_images(_at(u_mid, v_mid), INTR, border_distance=border)[0]
+    assert in_both_images(_at(219.0 - WEDGE_MARGIN_PX, v_mid), INTR, border_distance=border)[0]
+    assert not in_both_images(_at(221.0 - WEDGE_MARGIN_PX, v_mid), INTR, border_distance=border)[0]
+    assert in_both_images(_at(221.0 - WEDGE_MARGIN_PX, v_mid), INTR)[0]          # no wedge given: in
+    assert not in_both_images(_at(u_mid, 30.0 + WEDGE_MARGIN_PX - 2), INTR, border_distance=border)[0]
+    assert in_both_images(_at(u_mid, 30.0 + WEDGE_MARGIN_PX), INTR, border_distance=border)[0]
+    # accumulation's expected view agrees
+    top, bottom = _at(230.0, 100.0), _at(230.0, 140.0)
+    segment = Segments("gripper", (top + bottom) / 2, np.array([[0.0, 1.0, 0.0]]),
+                       np.array([float(bottom[0, 1] - top[0, 1])]), np.ones(1), np.ones(1, np.int64),
+                       {"sigma_depth_m": np.array([0.001])})
+    kind = LineSegmentType()
+    model = kind.observe(segment, FrameContext(np.eye(4), INTR))
+    assert kind.expected(model, FrameContext(np.eye(4), INTR))[0]
+    assert not kind.expected(model, FrameContext(np.eye(4), INTR, border))[0]

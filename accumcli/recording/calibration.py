@@ -157,6 +157,25 @@ class StereoRectifier:
         self._maps = None if self.rectified_input else [
             cv2.initUndistortRectifyMap(c.K, c.D, c.R, c.P[:, :3], (c.width, c.height), cv2.CV_16SC2)
             for c in (left, right)]
+        self.border_distance = self._border_distances()
+
+    def _border_distances(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(left, right) (H, W) uint8: each rectified pixel's distance, px (chessboard metric: the
+        reach of a square filter), to the nearest pixel that rectification did not fill wholly
+        from inside the raw image, capped at 255; None when it filled every pixel (rectified input,
+        or no pixel maps outside). Rectifying raw images of a toed-in or distorted pair leaves black
+        wedges whose borders are strong straight edges, the same in every frame: matched with each
+        other or with real edges they become 3D segments that do not move with the object, and a
+        model segment inside a wedge cannot be seen."""
+        if self._maps is None:
+            return None
+        full = np.full((self.intrinsics.height, self.intrinsics.width), 255, np.uint8)
+        filled = [cv2.remap(full, m1, m2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0) == 255
+                  for m1, m2 in self._maps]
+        if all(f.all() for f in filled):
+            return None
+        return tuple(np.minimum(cv2.distanceTransform(f.view(np.uint8), cv2.DIST_C, 3), 255).astype(np.uint8)
+                     for f in filled)
 
     def rectify(self, left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Rectified (H, W) images; the inputs themselves when already rectified."""

@@ -117,7 +117,9 @@ class StereoFrame:
     index: position of the pair in the recording (0-based, counting every
     pair, also those skipped); left, right: (H, W) uint8 rectified grey images;
     T_camera_object: (4, 4) pose of the object frame in the left camera frame,
-    or None with ``pose_problem`` saying why.
+    or None with ``pose_problem`` saying why; border_distance: (left, right) (H, W) uint8, px from
+    the nearest pixel that rectification did not fill from inside the raw images
+    (``StereoRectifier.border_distance``), None when there is none.
     """
 
     index: int
@@ -127,6 +129,7 @@ class StereoFrame:
     intrinsics: StereoIntrinsics
     T_camera_object: np.ndarray | None
     pose_problem: str | None = None
+    border_distance: tuple[np.ndarray, np.ndarray] | None = None
 
 
 @dataclass
@@ -520,7 +523,7 @@ class Recording:
                     T, problem = self.pose_at(t_ns), None
                 except PoseUnavailable as e:
                     T, problem = None, str(e)
-                yield StereoFrame(index, t_ns, left, right, rectifier.intrinsics, T, problem)
+                yield StereoFrame(index, t_ns, left, right, rectifier.intrinsics, T, problem, rectifier.border_distance)
 
     # -- summary --------------------------------------------------------------------------
     def info(self) -> RecordingInfo:
