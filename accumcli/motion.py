@@ -45,7 +45,11 @@ class MotionParams:
     ``sigma_relative_m``: the least standard deviation per axis of the recorded poses (a floor of
     ``fuse``'s estimate) and a term of the gate; ``gate_sigmas``: a correction further than this many
     standard deviations of the recorded poses' difference is not believed (a refinement can verify at
-    a wrong local minimum, 6-22 deg or 12-14 mm off on the random scenes); ``span``: each frame is
+    a wrong local minimum, 6-22 deg or 12-14 mm off on the random scenes), nor one whose chi-square
+    against that difference over the six axes exceeds ``gate_chi2`` (6 degrees of freedom, 1 %: on
+    seed 302 two links from one frame, 4 deg and 9-12 mm wrong and each within 3 sigma on every axis,
+    agreed with each other and were the only ones to two frames, which they took 12.6 mm off; this
+    halved the worst shortfall, 0.072 to 0.044, and 22.5 (0.1 %) let them through); ``span``: each frame is
     refined against the object segments of the ``span`` frames before it (a second link bridges a
     failed one, and a wrong one contradicts the others: on seeds 301-306 a span of 2 halved the median
     shortfall from the exact poses' model, 3 did not help further); ``residual_chi2``: after the
@@ -62,6 +66,7 @@ class MotionParams:
     sigma_relative_deg: float = 0.1
     sigma_relative_m: float = 0.0003
     gate_sigmas: float = 3.0
+    gate_chi2: float = 16.8
     span: int = 2
     residual_chi2: float | None = 16.8
     information_scale: float = 10.0
@@ -116,7 +121,8 @@ def fuse(links: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]], n: int, pa
     ``sum |x_k|^2 / s^2 + sum (x_k - x_j - c)^T L (x_k - x_j - c)``, one block-banded system: the
     images decide the directions they see (lateral, in-plane), the recorded poses the rest (depth and
     out-of-plane rotation of a small object: a link's 1 sigma there is 1-3 mm and about 0.5 deg).
-    A link beyond ``gate_sigmas`` of ``sqrt(2 s^2 + r^2)`` on any axis is dropped, and then, one at a
+    A link beyond ``gate_sigmas`` of ``sqrt(2 s^2 + r^2)`` on any axis, or whose chi-square against
+    it over all six, ``sum c^2 / (2 s^2 + r^2)``, exceeds ``gate_chi2``, is dropped, and then, one at a
     time, the link furthest from the fused poses while its chi-square ``e^T L e`` exceeds
     ``residual_chi2`` (a wrong link that the others and the recorded poses contradict). Frames linked
     share one gauge (their mean error, reduced by the square root of their number); unlinked frames
@@ -126,9 +132,10 @@ def fuse(links: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]], n: int, pa
     if not links or n < 2:
         return x
     s = np.maximum(np.repeat(_recorded_sigma(links.values()), 3), r)
-    gate = params.gate_sigmas * np.sqrt(2 * s ** 2 + r ** 2)
+    spread = 2 * s ** 2 + r ** 2     # the variance of two recorded poses' difference, per axis
     used = {jk: (c, L / params.information_scale) for jk, (c, L) in links.items()
-            if 0 <= jk[0] < jk[1] < n and np.all(np.abs(c) <= gate)}
+            if 0 <= jk[0] < jk[1] < n and np.all(np.abs(c) <= params.gate_sigmas * np.sqrt(spread))
+            and float(np.sum(c ** 2 / spread)) <= params.gate_chi2}
     log.info("motion: %d of %d frame-to-frame corrections used; recorded poses' sigma %.2f deg, %.1f mm",
              len(used), len(links), np.degrees(s[0]), s[3] * 1000)
     while True:

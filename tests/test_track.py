@@ -484,6 +484,32 @@ def test_fuse_draws_linked_frames_to_one_gauge_and_drops_a_wrong_correction():
     assert np.degrees(np.abs(residual[:, :3])).max() < 1.0 and np.abs(residual[:, 3:]).max() < 0.004
 
 
+def test_fuse_drops_agreeing_links_that_are_jointly_too_far():
+    """Two frames (20 and 21, recorded exactly) linked to the rest only by two links from frame 19,
+    both wrong by the same 2.4 standard deviations of two recorded poses' difference on every axis:
+    each passes the per-axis gate (3), their chi-square over the six axes (about 34) exceeds
+    ``gate_chi2``. With it they are dropped and the two frames keep their recorded poses; without
+    it they are pulled a third of the way to the links' error."""
+    import dataclasses
+
+    from accumcli.motion import MotionParams, _recorded_sigma, fuse
+
+    rng = np.random.default_rng(5)
+    n = 40
+    error = np.hstack([rng.normal(0, np.radians(1.0), (n, 3)), rng.normal(0, 0.003, (n, 3))])
+    error[20:22] = 0.0
+    params = MotionParams()
+    seen = params.information_scale * np.diag(np.repeat([1 / np.radians(0.02) ** 2, 1 / 0.00005 ** 2], 3))
+    links = {(j, k): (error[j] - error[k], seen) for j, k in [(k - 1, k) for k in range(1, n)] + [(19, 21)]}
+    del links[21, 22]
+    wrong = 2.4 * np.sqrt(2) * np.repeat(_recorded_sigma(links.values()), 3)
+    links[19, 20] = links[19, 21] = (wrong, seen)
+    gated = (fuse(links, n, params) + error)[20:22]
+    carried = (fuse(links, n, dataclasses.replace(params, gate_chi2=np.inf)) + error)[20:22]
+    assert (np.abs(gated) < 0.1 * wrong).all()
+    assert (np.abs(carried) > 0.25 * wrong).all()
+
+
 def test_fuse_takes_from_a_link_only_the_directions_it_sees():
     """A link that sees only its in-plane rotation (about z) corrects that axis and leaves the others
     to the recorded poses: two frames whose recorded errors differ by 1 deg about x and about z end
