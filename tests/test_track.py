@@ -56,6 +56,29 @@ def test_refinement_converges_from_a_perturbed_pose(noisy_pair, model_of_exact):
             assert rotation < 0.3 and translation < 0.001, (rotation, translation)
 
 
+def test_refined_on_model_corrects_a_fused_pose_within_its_gate_only(noisy_pair, model_of_exact):
+    """``motion.refined_on_model``: a fused pose 1.5 deg / 4 mm off comes back within 0.3 deg / 1 mm;
+    the same refinement from a pose off by more than the gate allows (or against a model of two
+    segments) leaves the pose as it was."""
+    import dataclasses
+
+    from accumcli.motion import MotionParams, refined_on_model
+
+    exact, _ = noisy_pair
+    truth = read_truth(exact.replace(".mcap", ".truth.json"))
+    accepted = model_of_exact.select(model_of_exact.accepted)
+    params = MotionParams()
+    with Recording(exact) as rec:
+        frame = next(rec.frames(2, 3))
+    T_true = truth.pose_at(frame.timestamp_ns)
+    off = perturbed(T_true, 1.5, 0.004, 7)
+    rotation, translation = pose_error(refined_on_model(accepted, frame, off, TrackParams()), T_true)
+    assert rotation < 0.3 and translation < 0.001, (rotation, translation)
+    tight = dataclasses.replace(params, model_gate_deg=0.5, model_gate_mm=1.0)
+    assert refined_on_model(accepted, frame, off, TrackParams(), params=tight) is off
+    assert refined_on_model(accepted.select(np.arange(2)), frame, off, TrackParams()) is off
+
+
 def _cone_beyond(model: Segments, T: np.ndarray, degrees: float) -> Segments:
     """``model`` with view cones of 5 deg that the camera at ``T`` sees from ``degrees`` outside."""
     to_camera = np.linalg.inv(T)[:3, 3] - model.centers

@@ -17,7 +17,7 @@ from ..evaluate import EdgeSamples, score_segments
 from ..lines2d import StageTimes
 from ..logs import LimitedWarnings
 from ..model_io import read_truth, write_json_lines, write_model, write_ply
-from ..motion import MotionParams, corrected, frame_to_frame, fuse, object_segments
+from ..motion import MotionParams, corrected, frame_to_frame, fuse, object_segments, refined_on_model
 from ..outputs import OutputSet
 from ..pipeline import AccumulateParams, LineAccumulation
 from ..segments import Segments
@@ -163,7 +163,7 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
 class ExtractionStore:
     """Each frame's extraction (without its gradients) kept in a temporary file by the first pass over a
     recording and read back, in order, by the later ones: the extraction runs once however many passes
-    (``--motion tracked`` makes three), and memory stays flat (the file grows by about 160 kB a frame;
+    (``--motion tracked`` makes four), and memory stays flat (the file grows by about 160 kB a frame;
     it is deleted when closed or collected)."""
 
     def __init__(self):
@@ -195,7 +195,8 @@ def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str,
     (called once per pass: the recording is streamed again; its extractions are recorded in ``store``
     by pass 1 and replayed after), by the passes of ``motion``: pass 1 accumulates with the recorded
     poses, pass 2 measures the frame-to-frame corrections against pass 1's accepted segments, ``fuse``
-    combines them with the recorded poses."""
+    combines them with the recorded poses, pass 3 accumulates with the fused poses and refines each
+    on that model (``refined_on_model``)."""
     gripper = LineAccumulation(AccumulateParams(params.extract, params.line_model, params.rule), object_frame,
                                camera_frame)
     for frame, extraction in store.record(extracted_frames(frames_with_pose(), params.extract, camera_frame,
@@ -215,4 +216,19 @@ def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str,
         previous.append((k, object_segments(extraction.segments, frame.T_camera_object, skeleton, motion)))
         recorded.append((frame.index, frame.T_camera_object))
     x = fuse(links, len(recorded), motion)
-    return {index: corrected(T, xk) for (index, T), xk in zip(recorded, x)}
+    fused = {index: corrected(T, xk) for (index, T), xk in zip(recorded, x)}
+    if not motion.model_pass:
+        return fused
+    again = LineAccumulation(AccumulateParams(params.extract, params.line_model, params.rule), object_frame,
+                             camera_frame)
+    for frame, extraction in store.replay(frames_with_pose()):
+        again.step(frame, fused[frame.index], extraction)
+    model = again.model()
+    model = model.select(model.accepted)
+    refined = {}
+    for frame, extraction in store.replay(frames_with_pose()):
+        t0 = time.perf_counter()
+        refined[frame.index] = refined_on_model(model, frame, fused[frame.index], params.track, extraction.gradients,
+                                                motion)
+        times.add("tracking", t0)
+    return refined
