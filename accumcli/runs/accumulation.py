@@ -197,13 +197,18 @@ def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str,
     poses, pass 2 measures the frame-to-frame corrections against pass 1's accepted segments, ``fuse``
     combines them with the recorded poses, pass 3 accumulates with the fused poses and refines each
     on that model (``refined_on_model``)."""
-    gripper = LineAccumulation(AccumulateParams(params.extract, params.line_model, params.rule), object_frame,
-                               camera_frame)
-    for frame, extraction in store.record(extracted_frames(frames_with_pose(), params.extract, camera_frame,
-                                                           workers, times)):
-        gripper.step(frame, frame.T_camera_object, extraction)
-    skeleton = gripper.model()
-    skeleton = skeleton.select(skeleton.accepted)
+    def accepted(extractions, pose_of) -> Segments:
+        """The accepted segments of an accumulation, with the known motion, of (frame, extraction) pairs,
+        each frame placed by ``pose_of(frame)``."""
+        accumulation = LineAccumulation(AccumulateParams(params.extract, params.line_model, params.rule),
+                                        object_frame, camera_frame)
+        for frame, extraction in extractions:
+            accumulation.step(frame, pose_of(frame), extraction)
+        model = accumulation.model()
+        return model.select(model.accepted)
+
+    skeleton = accepted(store.record(extracted_frames(frames_with_pose(), params.extract, camera_frame, workers,
+                                                      times)), lambda frame: frame.T_camera_object)
     recorded, links, previous = [], {}, collections.deque(maxlen=motion.span)
     for frame, extraction in store.replay(frames_with_pose()):
         k = len(recorded)
@@ -219,12 +224,7 @@ def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str,
     fused = {index: corrected(T, xk) for (index, T), xk in zip(recorded, x)}
     if not motion.model_pass:
         return fused
-    again = LineAccumulation(AccumulateParams(params.extract, params.line_model, params.rule), object_frame,
-                             camera_frame)
-    for frame, extraction in store.replay(frames_with_pose()):
-        again.step(frame, fused[frame.index], extraction)
-    model = again.model()
-    model = model.select(model.accepted)
+    model = accepted(store.replay(frames_with_pose()), lambda frame: fused[frame.index])
     refined = {}
     for frame, extraction in store.replay(frames_with_pose()):
         t0 = time.perf_counter()
