@@ -258,9 +258,12 @@ def test_an_interrupt_leaves_the_previous_output_and_no_temporary(tmp_path, sign
     accum = shutil.which("accum", path=os.path.dirname(sys.executable)) or shutil.which("accum")
     model = tmp_path / "m.json"
     model.write_text("previous")
+    # as a terminal's foreground command has it: a runner started in the background (``cmd &`` in a
+    # script) ignores SIGINT, and its children would inherit that (Python keeps an ignored SIGINT)
     process = subprocess.Popen([accum, "accumulate", "sample_data/sim_box.mcap", "-o", str(model)],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                               cwd=os.path.dirname(os.path.dirname(__file__)))
+                               cwd=os.path.dirname(os.path.dirname(__file__)),
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     time.sleep(delay)
     process.send_signal(getattr(signal, signum))
     out, err = process.communicate(timeout=60)
