@@ -51,6 +51,11 @@ suite: $(VENV)/.installed
 	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python benchmarks/suite.py
 	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python benchmarks/track_suite.py
 
+# Are the extracted segments' depth and direction sigmas honest? Errors against truth per sigma bin (after make suite).
+.PHONY: uncertainty
+uncertainty: $(VENV)/.installed
+	$(BIN)/python benchmarks/uncertainty.py
+
 # --motion tracked on noisy gripper poses against the exact-pose model (random scenes, a few minutes).
 .PHONY: motion
 motion: $(VENV)/.installed
