@@ -26,6 +26,7 @@ from .cli_options import (
     workers_option,
 )
 from .errors import AccumError
+from .outputs import caused_by_interrupt
 
 log = logging.getLogger("accumcli")
 
@@ -54,6 +55,11 @@ class AccumGroup(click.Group):
             click.echo(f"error: {e}", err=True)
             code = 1
         except (KeyboardInterrupt, click.Abort):
+            click.echo("error: interrupted", err=True)
+            code = 130
+        except SystemError as e:   # an interrupt that compiled code wrapped; any other stays a bug
+            if not caused_by_interrupt(e):
+                raise
             click.echo("error: interrupted", err=True)
             code = 130
         sys.exit(code if isinstance(code, int) else 0)

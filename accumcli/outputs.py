@@ -104,6 +104,19 @@ def _raise_interrupt(signum, frame):
     raise KeyboardInterrupt(signal.Signals(signum).name)
 
 
+def caused_by_interrupt(error: BaseException) -> bool:
+    """True if a KeyboardInterrupt is in ``error``'s chain of causes: a signal that arrives while C
+    code calls back into Python (numba loading a cached kernel on its first call, for one) raises
+    KeyboardInterrupt there, which the C code hands on wrapped in a SystemError."""
+    seen = set()
+    while error is not None and id(error) not in seen:
+        if isinstance(error, KeyboardInterrupt):
+            return True
+        seen.add(id(error))
+        error = error.__cause__ or error.__context__
+    return False
+
+
 def interrupt_on_sigterm() -> None:
     """Make SIGTERM raise KeyboardInterrupt like SIGINT does, so an OutputSet cleans up on
     both (call once, from the main thread, e.g. at CLI start)."""

@@ -272,6 +272,36 @@ def test_an_interrupt_leaves_the_previous_output_and_no_temporary(tmp_path, sign
     assert model.read_text() == "previous" and os.listdir(tmp_path) == ["m.json"]
 
 
+def _wrapped_interrupt(*args, **kwargs):
+    """What numba does with a KeyboardInterrupt raised while it loads a cached kernel."""
+    try:
+        raise KeyboardInterrupt("SIGTERM")
+    except KeyboardInterrupt as e:
+        raise SystemError("<function _numba_unpickle> returned a result with an exception set") from e
+
+
+def test_an_interrupt_wrapped_by_compiled_code_is_an_interrupt(small_recording, tmp_path, monkeypatch):
+    """A signal landing in numba's first-call dispatch (seen in CI) ends as Ctrl-C does; any other
+    SystemError is a bug and keeps its traceback."""
+    import os
+
+    import accumcli.runs
+
+    model = tmp_path / "m.json"
+    model.write_text("previous")
+    monkeypatch.setattr(accumcli.runs, "accumulate_recording", _wrapped_interrupt)
+    result = run("accumulate", small_recording, "-o", model)
+    assert result.exit_code == 130 and result.output.strip().splitlines()[-1] == "error: interrupted"
+    assert model.read_text() == "previous" and os.listdir(tmp_path) == ["m.json"]
+
+    def bug(*args, **kwargs):
+        raise SystemError("a real bug")
+
+    monkeypatch.setattr(accumcli.runs, "accumulate_recording", bug)
+    result = run("accumulate", small_recording, "-o", model)
+    assert result.exit_code == 1 and isinstance(result.exception, SystemError)
+
+
 def test_a_rosbag2_folder_is_a_recording_for_every_command(small_recording, tmp_path):
     from accumcli.recording import Rosbag2Writer
     from accumcli.recording.ros2 import convert_to_ros2
