@@ -756,16 +756,19 @@ class PoseTracker:
         s = (time_ns - previous_ns) / max(last_ns - previous_ns, 1)
         return [orthonormalized(extrapolate(previous, last, s)), last]
 
-    def _implausible(self, estimate: PoseEstimate, time_ns: int, predicted: np.ndarray | None = None) -> str:
+    def _implausible(self, estimate: PoseEstimate, time_ns: int, predicted: list | None = None) -> str:
         """Why ``estimate`` cannot be the object's pose given its recent motion ('' if it can): more than
-        ``max_jump_deg`` or ``max_jump_m`` from the constant-velocity prediction while the last tracked
-        frame is at most ``max_gap_s`` old. A re-acquisition may find a symmetric twin (a box's half
-        turn) whose image evidence is as good as the true pose's; the motion tells them apart."""
+        ``max_jump_deg`` or ``max_jump_m`` from both of ``predict``'s poses (constant velocity, and the
+        last tracked pose: after a few lost frames constant velocity overshoots an object that turned
+        back, and rejected the true pose on dev_steps_track) while the last tracked frame is at most
+        ``max_gap_s`` old. A re-acquisition may find a symmetric twin (a box's half turn) whose image
+        evidence is as good as the true pose's; the motion tells them apart."""
         p = self.params
         if not self.history or (time_ns - self.history[-1][0]) * 1e-9 > p.max_gap_s:
             return ""
-        predicted = self.predict(time_ns)[0] if predicted is None else predicted   # the frame's, computed once
-        rotation, translation = pose_error(estimate.T_camera_object, predicted)
+        predicted = self.predict(time_ns) if predicted is None else predicted   # the frame's, computed once
+        rotation, translation = min((pose_error(estimate.T_camera_object, T) for T in predicted),
+                                    key=lambda e: max(e[0] / p.max_jump_deg, e[1] / p.max_jump_m))
         if rotation <= p.max_jump_deg and translation <= p.max_jump_m:
             return ""
         return (f"{rotation:.0f} deg and {translation * 1000:.0f} mm from the motion prediction "
@@ -850,7 +853,7 @@ class PoseTracker:
                                 f"(needs {p.min_support_fraction:.0%})")
             if ransac.reason:
                 reacquisition = f"re-acquisition: {ransac.reason}"
-        predicted = self.predict(frame.timestamp_ns)[0] if self.history else None
+        predicted = self.predict(frame.timestamp_ns) if self.history else None
         for c in candidates:
             why = (self._implausible(c, frame.timestamp_ns, predicted)
                    if c.status == "tracked" and T_guess is None else "")

@@ -448,6 +448,24 @@ def test_a_pose_far_from_the_motion_prediction_is_not_tracked():
     assert tracker._implausible(flipped, 1_000_000_000) == ""
 
 
+def test_after_lost_frames_a_pose_near_the_last_tracked_one_is_plausible():
+    """Constant velocity over a gap of lost frames overshoots an object that turned back: 10 degrees a
+    frame, lost for 2.5 frames' time, then found back at the last tracked pose. 35 degrees from the
+    extrapolation, yet plausible, as the last pose is one of the tracker's own starts; a half turn
+    stays implausible."""
+    from accumcli.track import PoseEstimate
+
+    tracker = PoseTracker(_box_model())
+    T0 = perturbed(T_FRONT, 10.0, 0.0)
+    tracker.history = [(0, T0), (100_000_000, T_FRONT)]
+    back = PoseEstimate(T_FRONT.copy(), 0.3, 200, 210, "tracked", coverage=0.8)
+    assert pose_error(tracker.predict(450_000_000)[0], T_FRONT)[0] == pytest.approx(35.0)   # the limit: 30
+    assert tracker._implausible(back, 450_000_000) == ""
+    half_turn = make_transform(Rotation.from_rotvec([0, 0, np.pi]).as_matrix(), [0.0, 0.0, 0.5])
+    assert "deg" in tracker._implausible(PoseEstimate(half_turn, 0.3, 200, 210, "tracked", coverage=0.8),
+                                         450_000_000)
+
+
 def test_residual_limits_are_calibrated_on_the_first_given_pose_within_bounds():
     """Real images leave 0.7 px and 85 % inliers at the right pose: the limits follow, capped; a clean
     first frame leaves the defaults; a first frame with nothing measured changes nothing."""
