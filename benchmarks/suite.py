@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import os
 import statistics
 import sys
@@ -74,8 +75,9 @@ def real_and_independent_rows() -> list[Row]:
     return rows
 
 
-def score(row: Row) -> dict:
-    """Extract (with 2D segments), evaluate the frames; accumulate, evaluate the model."""
+def score(row: Row, view_planes: bool = False) -> dict:
+    """Extract (with 2D segments), evaluate the frames; accumulate (``view_planes``: with
+    ``accum accumulate --view-planes``), evaluate the model."""
     from accumcli.runs import (
         RecordingOptions,
         accumulate_recording,
@@ -89,7 +91,11 @@ def score(row: Row) -> dict:
     frames_file, model_file = out / f"{row.name}.frames.jsonl", out / f"{row.name}.model.json"
     extract_recording(row.path, str(frames_file), options=options, with_2d=True)
     figures = evaluate_file(str(frames_file), row.truth)
-    result = accumulate_recording(row.path, [str(model_file)], options=options)
+    from accumcli.line_model import LineModelParams
+    from accumcli.pipeline import AccumulateParams
+
+    params = AccumulateParams(line_model=LineModelParams(view_planes=view_planes))
+    result = accumulate_recording(row.path, [str(model_file)], options=options, params=params)
     figures.update(evaluate_file(str(model_file), row.truth, support_face=row.support_face))
     if "surface_precision" in figures:   # judged by surface where the truth has faces (teabox README)
         figures["precision"], figures["background"] = figures["surface_precision"], figures["surface_background"]
@@ -135,16 +141,18 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--only", help="run only the rows whose name contains this")
     parser.add_argument("--no-save", action="store_true", help="do not write docs/suite.md")
+    parser.add_argument("--view-planes", action="store_true",
+                        help="accumulate with --view-planes (a variant: docs/suite.md is not written)")
     args = parser.parse_args(argv)
     rows = simulated_rows() + real_and_independent_rows()
     if args.only:
         rows = [r for r in rows if args.only in r.name]
     t0 = time.perf_counter()
-    results = score_rows(rows, score)
+    results = score_rows(rows, functools.partial(score, view_planes=args.view_planes))
     lines = table(results, rows)
     print("\n".join(lines))
     print(f"\n{len(rows)} recordings in {time.perf_counter() - t0:.0f} s")
-    if not args.no_save and not args.only:
+    if not args.no_save and not args.only and not args.view_planes:
         doc = ROOT / "docs" / "suite.md"
         doc.write_text("# The scoreboard (`make suite`)\n\n" + __doc__.split("\n\n")[1].replace("\n", " ")
                        + f"\n\nLast run: {time.strftime('%Y-%m-%d')}, {os.cpu_count()} cores.\n\n"

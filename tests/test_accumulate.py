@@ -11,7 +11,7 @@ from scipy.spatial.transform import Rotation
 
 from accumcli.accumulate import Accumulator, UpdateRule, one_to_one
 from accumcli.geometry import invert, make_transform, transform_points
-from accumcli.line_model import FrameContext, LineSegmentType, sigmas
+from accumcli.line_model import FrameContext, LineModelParams, LineSegmentType, sigmas
 from accumcli.recording import StereoIntrinsics
 from accumcli.segments import Segments
 
@@ -137,6 +137,43 @@ def test_merge_trusts_each_view_across_and_covers_the_union_along_the_line():
     assert 0.0001 < center[0] < 0.0002          # across, in x: the average too
     # along y: the union of [-6, 6] mm and [-2, 10] mm, centred on its middle: 4 mm shift, 2 mm move
     assert abs(center[1] - 0.002) < 1e-9 and abs(merged.lengths[0] - 0.016) < 1e-9
+
+
+def _copy(observed: Segments) -> Segments:
+    """An observation as extracted (centre, direction, length, confidence, its two sigmas)."""
+    return Segments(observed.frame_id, observed.centers.copy(), observed.directions.copy(), observed.lengths.copy(),
+                    observed.confidence.copy(), observed.observations.copy(),
+                    {"sigma_depth_m": np.array([0.001]), "sigma_direction_rad": np.array([np.radians(6.0)])})
+
+
+def test_two_views_planes_pin_the_direction_that_stereo_tilts():
+    """A segment along y seen from two views 40 degrees apart about it, each triangulated 15 degrees
+    tilted towards its camera (stereo's weak direction, within the plane through the camera and the
+    line): with ``view_planes`` the two planes meet near the true direction; averaging (the default)
+    keeps the tilt."""
+    kind = LineSegmentType(LineModelParams(view_planes=True))
+    views = []
+    for turn_deg in (0.0, 40.0):
+        T = make_transform(Rotation.from_rotvec([0, np.radians(turn_deg), 0]).as_matrix(), [0.0, 0.0, 0.5])
+        camera = invert(T)[:3, 3]                                   # in the object frame
+        toward = camera - camera[1] * np.array([0.0, 1.0, 0.0])     # across y, towards the camera
+        toward /= np.linalg.norm(toward)
+        tilted = np.cos(np.radians(15)) * np.array([0.0, 1.0, 0.0]) + np.sin(np.radians(15)) * toward
+        segment = _one_segment(tuple(tilted))
+        segment.extra["sigma_direction_rad"] = np.array([np.radians(6.0)])
+        observed = kind.observe(segment, FrameContext(T, INTR))
+        views.append((observed, T))
+    first, _ = views[0]
+    # one view alone keeps its own (tilted) direction
+    assert abs(np.degrees(np.arccos(abs(first.directions[0, 1]))) - 15.0) < 1e-6
+    default = LineSegmentType()
+    averaged = default.merge(default.observe(_copy(first), FrameContext(views[0][1], INTR)),
+                             default.observe(_copy(views[1][0]), FrameContext(views[1][1], INTR)),
+                             np.array([0]), np.array([0]), FrameContext(views[1][1], INTR))
+    assert np.degrees(np.arccos(abs(averaged.directions[0, 1]))) > 10.0    # 14
+    merged = kind.merge(first, views[1][0], np.array([0]), np.array([0]), FrameContext(views[1][1], INTR))
+    assert np.degrees(np.arccos(abs(merged.directions[0, 1]))) < 2.0     # the two stereo pulls leave 1.7
+    assert np.degrees(sigmas(merged)[1][0]) < 2.0               # and the merged segment knows it
 
 
 def test_merge_trims_the_union_to_max_extent_at_both_ends():
