@@ -301,7 +301,8 @@ def extract(recording, output, rrd, with_2d, workers, frames, extract_params, op
               help="A segment's direction from the planes through the camera and the segment in all the "
                    "frames that saw it (the object's turn as a wide baseline) instead of the average of "
                    "its stereo directions: more precise models (make suite: precision median 0.945 -> "
-                   "0.953); not the default yet, as tracking with such models has not been shown to hold.")
+                   "0.953) where the poses are good to half a degree; not the default yet, as tracking with "
+                   "such models has not been shown to hold.")
 @frame_workers_option
 @frames_option
 @extraction_options
