@@ -27,7 +27,10 @@ least ``min_inliers`` distances (and ``min_inlier_fraction`` of those measured) 
 are at most ``max_std_deg`` and ``max_std_mm`` on every axis, and the coverage (the share of the visible
 model's sample points on an edge in both images, i.e. at the pose's disparity, each weighted by
 ``expected_weights``) is at least
-``min_coverage``; otherwise ``lost`` (``judge``). ``PoseTracker`` adapts the RMS and inlier-share
+``min_coverage``, and at least ``min_shown`` of the model's accepted segments are expected in view
+(their ``expected_weights`` summed: a handful of segments can line up with any edges, as the
+chessboard's grid did on sim_box from a pose that showed under 1 % of it); otherwise ``lost``
+(``judge``). ``PoseTracker`` adapts the RMS and inlier-share
 limits once, on the refinement of the first frame's given pose (``calibrated``). The tracker then
 compares the candidate poses of a frame (``decide``): a verified pose whose coverage exceeds that of
 a distinct verified alternative by less than ``min_margin`` is ``ambiguous`` and keeps the alternatives. Every estimate carries its
@@ -104,6 +107,7 @@ class TrackParams:
     converged_m: float = 1e-5                # 0.01 mm ends the level: far below the poses' std
     level_slack: float = 0.05                # a level's pose is kept unless its coverage falls by more
     min_coverage: float = 0.5                # of the visible model's points on an edge in both images
+    min_shown: float = 0.02                  # share of the model's accepted segments expected in view
     max_std_deg: float = 0.3                 # of the last Gauss-Newton step, per axis: the pose is determined
     max_std_mm: float = 1.0
     min_margin: float = 0.1                  # coverage over the best distinct alternative pose, else ambiguous
@@ -149,6 +153,7 @@ class PoseEstimate:
     alternatives: list = field(default_factory=list)
     information: np.ndarray | None = None     # (6, 6) J^T W J / sigma^2 of the images, increments about pivot
     pivot: np.ndarray | None = None           # (3,) metres, camera frame: the visible model's centroid
+    shown: float = 1.0                        # share of the model's accepted segments expected in view
 
     def figures(self) -> dict:
         """The estimate's figures as JSON-ready extra fields of a poses.json entry."""
@@ -156,7 +161,8 @@ class PoseEstimate:
             return round(float(value), digits) if value is not None and np.isfinite(value) else None
 
         out = {"residual_px": number(self.residual_px), "inliers": self.inliers, "measured": self.measured,
-               "coverage": number(self.coverage), "margin": number(self.margin), "method": self.method}
+               "coverage": number(self.coverage), "margin": number(self.margin), "shown": number(self.shown),
+               "method": self.method}
         if self.std_rotation_deg is not None:
             out["std_rotation_deg"] = [number(v, 5) for v in self.std_rotation_deg]
             out["std_translation_mm"] = [number(v, 5) for v in self.std_translation_mm]
@@ -463,11 +469,12 @@ def _verify_at(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, grads,
     if found < 6:
         return PoseEstimate(T.copy(), float("inf"), 0, found, "lost",
                             reason=f"{found} model points found an image edge (needs 6)")
-    return _verify(T, points_obj, measurements, intr, tukey, params, expected)
+    shown = float(expected.sum()) / params.samples_per_segment / max(len(accepted), 1)
+    return _verify(T, points_obj, measurements, intr, tukey, params, expected, shown)
 
 
 def _verify(T: np.ndarray, points_obj: np.ndarray, measurements, intr: StereoIntrinsics, tukey: float,
-            params: TrackParams, expected: np.ndarray) -> PoseEstimate:
+            params: TrackParams, expected: np.ndarray, shown: float = 1.0) -> PoseEstimate:
     """The estimate at the final pose ``T`` against the finest level's measurements: inliers, RMS,
     coverage (both images, each sample weighted by ``expected`` (S,), ``expected_weights``), the
     standard deviations of a Gauss-Newton increment (``sigma^2 (J^T W J)^-1``, sigma^2 the
@@ -497,7 +504,7 @@ def _verify(T: np.ndarray, points_obj: np.ndarray, measurements, intr: StereoInt
             std_rotation, std_translation = np.degrees(std[:3]), std[3:] * 1000
     estimate = PoseEstimate(T, rms, int(inliers.sum()), len(r), "lost", coverage=coverage,
                             std_rotation_deg=std_rotation, std_translation_mm=std_translation,
-                            information=information, pivot=pivot)
+                            information=information, pivot=pivot, shown=shown)
     return judge(estimate, params)
 
 
@@ -517,6 +524,8 @@ def judge(estimate: PoseEstimate, params: TrackParams) -> PoseEstimate:
         failed.append(f"RMS {e.residual_px:.2f} px (needs <= {p.max_rms_px:.2f})")
     if not e.coverage >= p.min_coverage:
         failed.append(f"coverage {e.coverage:.2f} in both images (needs {p.min_coverage})")
+    if not e.shown >= p.min_shown:
+        failed.append(f"{e.shown:.1%} of the model expected in view (needs {p.min_shown:.0%})")
     if e.std_rotation_deg is None:
         failed.append("the pose is not determined (singular Gauss-Newton system)")
     elif not (e.std_rotation_deg.max() <= p.max_std_deg and e.std_translation_mm.max() <= p.max_std_mm):

@@ -466,6 +466,22 @@ def test_after_lost_frames_a_pose_near_the_last_tracked_one_is_plausible():
                                          450_000_000)
 
 
+def test_a_pose_that_expects_almost_none_of_the_model_in_view_is_not_verified():
+    """The chessboard's model fitted sim_box's edges at 0.23 px and coverage 0.60 from a pose where
+    under 1 % of the model was expected in view (the tracking scoreboard's wrong model, with a model
+    accumulated with view planes): so few segments verify nothing. The same figures with a fifth of
+    the model in view verify."""
+    from accumcli.track import PoseEstimate, judge
+
+    def estimate(shown):
+        return PoseEstimate(T_FRONT.copy(), 0.23, 187, 190, "lost", coverage=0.60, shown=shown,
+                            std_rotation_deg=np.full(3, 0.09), std_translation_mm=np.full(3, 0.3))
+
+    assert judge(estimate(0.2), TrackParams()).status == "tracked"
+    few = judge(estimate(0.0075), TrackParams())
+    assert few.status == "lost" and "0.8% of the model expected in view (needs 2%)" in few.reason
+
+
 def test_residual_limits_are_calibrated_on_the_first_given_pose_within_bounds():
     """Real images leave 0.7 px and 85 % inliers at the right pose: the limits follow, capped; a clean
     first frame leaves the defaults; a first frame with nothing measured changes nothing."""
