@@ -54,12 +54,9 @@ class AccumGroup(click.Group):
         except AccumError as e:
             click.echo(f"error: {e}", err=True)
             code = 1
-        except (KeyboardInterrupt, click.Abort):
-            click.echo("error: interrupted", err=True)
-            code = 130
-        except SystemError as e:   # an interrupt that compiled code wrapped; any other stays a bug
-            if not caused_by_interrupt(e):
-                raise
+        except (KeyboardInterrupt, click.Abort, SystemError) as e:
+            if isinstance(e, SystemError) and not caused_by_interrupt(e):
+                raise          # a SystemError is an interrupt only when compiled code wrapped one; else a bug
             click.echo("error: interrupted", err=True)
             code = 130
         sys.exit(code if isinstance(code, int) else 0)

@@ -36,9 +36,9 @@ Entities are ``Segments`` in the object frame with running sums in ``extra``:
   worse beyond the noise; but the tracking scoreboard, whose zero false
   frames are known to move with any change of the models, then has two
   (sim_201 10.5 mm, dev_steps_track 5.9 deg), so it is not the default until
-  tracking holds with it. It trusts the poses
-  to ``pose_rotation_sigma_deg``: with ``--motion tracked`` on poses wrong by
-  1.5 deg / 4 mm (``make motion``) the worst shortfall grew from 0.055 to 0.113;
+  tracking holds with it. It trusts the poses to ``pose_rotation_sigma_deg``:
+  with ``--motion tracked`` on poses wrong by 1.5 deg / 4 mm (``make
+  motion``) the worst shortfall grew from 0.055 to 0.113;
 - along the line, the segment covers the union of its extent and the merged
   observation's, its centre re-placed at the middle of that union: an
   observation of the same length shifted by 4 mm along the line moves the
@@ -52,9 +52,10 @@ Entities are ``Segments`` in the object frame with running sums in ``extra``:
   inverse variances of the merged observations' depth (``sigma_depth_m``, the weak
   direction of stereo, so an upper bound of the position error) and direction
   (``sigma_direction_rad``), the latter (with ``view_planes``) raised to what
-  ``dir_info`` holds in its weakest direction once distinct views pin it. Their inverse square roots are the segment's own
-  sigmas that gate association (``metric.candidate_pairs``): an unsure far
-  segment is looked for in a wider gate than a precise near one;
+  ``dir_info`` holds in its weakest direction once distinct views pin it.
+  Their inverse square roots are the segment's own sigmas that gate
+  association (``metric.candidate_pairs``): an unsure far segment is looked
+  for in a wider gate than a precise near one;
 - ``views`` (N, K, 3): up to K unit directions (object frame, segment to
   camera) from which the segment was confirmed, at least ``view_step_deg``
   apart (zero vectors where unused): the set of aspects in which it has been

@@ -474,7 +474,7 @@ def _verify_at(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, grads,
 
 
 def _verify(T: np.ndarray, points_obj: np.ndarray, measurements, intr: StereoIntrinsics, tukey: float,
-            params: TrackParams, expected: np.ndarray, shown: float = 1.0) -> PoseEstimate:
+            params: TrackParams, expected: np.ndarray, shown: float) -> PoseEstimate:
     """The estimate at the final pose ``T`` against the finest level's measurements: inliers, RMS,
     coverage (both images, each sample weighted by ``expected`` (S,), ``expected_weights``), the
     standard deviations of a Gauss-Newton increment (``sigma^2 (J^T W J)^-1``, sigma^2 the

@@ -27,6 +27,14 @@ def recording(name: str, **options) -> str:
     return str(path)
 
 
+def accumulate_params(view_planes: bool = False):
+    """The accumulation parameters of the scoreboards: the defaults, or ``accum accumulate --view-planes``."""
+    from accumcli.line_model import LineModelParams
+    from accumcli.pipeline import AccumulateParams
+
+    return AccumulateParams(line_model=LineModelParams(view_planes=view_planes))
+
+
 def run_child(code: str) -> dict:
     """Run Python ``code`` in a fresh single-threaded interpreter; it prints one JSON line, returned
     with the child's peak resident memory (MB) added.

@@ -24,7 +24,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import CACHE, ROOT, recording, score_rows  # noqa: E402
+from common import CACHE, ROOT, accumulate_params, recording, score_rows  # noqa: E402
 
 SHARED = ROOT.parent / "shared" / "data"
 SIMULATED = 12
@@ -91,11 +91,7 @@ def score(row: Row, view_planes: bool = False) -> dict:
     frames_file, model_file = out / f"{row.name}.frames.jsonl", out / f"{row.name}.model.json"
     extract_recording(row.path, str(frames_file), options=options, with_2d=True)
     figures = evaluate_file(str(frames_file), row.truth)
-    from accumcli.line_model import LineModelParams
-    from accumcli.pipeline import AccumulateParams
-
-    params = AccumulateParams(line_model=LineModelParams(view_planes=view_planes))
-    result = accumulate_recording(row.path, [str(model_file)], options=options, params=params)
+    result = accumulate_recording(row.path, [str(model_file)], options=options, params=accumulate_params(view_planes))
     figures.update(evaluate_file(str(model_file), row.truth, support_face=row.support_face))
     if "surface_precision" in figures:   # judged by surface where the truth has faces (teabox README)
         figures["precision"], figures["background"] = figures["surface_precision"], figures["surface_background"]

@@ -34,7 +34,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import CACHE, ROOT, recording, score_rows  # noqa: E402
+from common import CACHE, ROOT, accumulate_params, recording, score_rows  # noqa: E402
 
 SHARED = ROOT.parent / "shared" / "data"
 SEEDS = (201, 202, 203, 204, 205, 206)
@@ -85,12 +85,8 @@ def score(row: Row, view_planes: bool = False) -> dict:
     from accumcli.runs import FrameRange, RecordingOptions, accumulate_recording, track_recording
 
     (CACHE / "track_suite").mkdir(parents=True, exist_ok=True)
-    from accumcli.line_model import LineModelParams
-    from accumcli.pipeline import AccumulateParams
-
-    params = AccumulateParams(line_model=LineModelParams(view_planes=view_planes))
     model = accumulate_recording(row.model_path, options=RecordingOptions(object_frame=row.object_frame),
-                                 frames=FrameRange(*row.model_frames), params=params).model
+                                 frames=FrameRange(*row.model_frames), params=accumulate_params(view_planes)).model
     # the wrong model's object frame is not the tracked recording's: start it where sim_box's recorded pose is
     track_frame = "gripper" if row.truth is None else row.object_frame
     result = track_recording(model, row.track_path, options=RecordingOptions(object_frame=track_frame),

@@ -44,18 +44,18 @@ def errors(frames_file: str, truth_file: str) -> np.ndarray:
         if T is None or len(segments) == 0 or "sigma_direction_rad" not in segments.extra:
             continue
         local = segments.transformed(invert(T), "object")
-        distance = _point_edge_distance(local.centers, edges.a, edges.b)
-        nearest = distance.argmin(axis=1)
-        near = distance.min(axis=1) <= NEAR_M
+        distances = _point_edge_distance(local.centers, edges.a, edges.b)
+        nearest = distances.argmin(axis=1)
+        distance = distances[np.arange(len(local)), nearest]
+        near = distance <= NEAR_M
         direction_error = np.degrees(np.arccos(np.clip(np.abs(np.sum(local.directions * edge_dir[nearest], 1)), 0, 1)))
-        a = edges.a[nearest]
-        offset = local.centers - a
+        offset = local.centers - edges.a[nearest]
         offset -= np.sum(offset * edge_dir[nearest], 1)[:, None] * edge_dir[nearest]   # across the edge
         ray = segments.centers / np.linalg.norm(segments.centers, axis=1, keepdims=True)
         offset_camera = rotate_vectors(T, offset)
         depth_error = np.sum(offset_camera * ray, axis=1)
         across_ray = np.linalg.norm(offset_camera - depth_error[:, None] * ray, axis=1)
-        on_ray = (distance.min(axis=1) <= DEPTH_REACH_M) & (direction_error <= 10) & (across_ray <= ACROSS_RAY_M)
+        on_ray = (distance <= DEPTH_REACH_M) & (direction_error <= 10) & (across_ray <= ACROSS_RAY_M)
         rows.append(np.column_stack([np.where(near, direction_error, np.nan),
                                      np.degrees(segments.extra["sigma_direction_rad"]),
                                      np.where(on_ray, 1000 * depth_error, np.nan),
