@@ -88,6 +88,10 @@ from .visibility import segments_in_both_images
 
 
 
+# the entity's sums that an observation adds to, scaled down together at ``max_weight`` (``dir_info``: view planes)
+RUNNING_SUMS = ("info", "info_vec", "dir_sum", "weight", "inv_var_position", "inv_var_direction", "dir_info")
+
+
 @dataclass(frozen=True)
 class LineModelParams:
     thresholds: MetricThresholds = MetricThresholds()
@@ -234,8 +238,7 @@ class LineSegmentType:
         x, o = model.extra, observed.extra
         extra = x  # updated in place: copying the whole model's state every frame would cost more than the merge
         scale = np.minimum(1.0, self.params.max_weight / np.maximum(x["weight"][mi], 1e-9))
-        for key in ("info", "info_vec", "dir_sum", "weight", "inv_var_position", "inv_var_direction",
-                    *(("dir_info",) if "dir_info" in x else ())):
+        for key in (k for k in RUNNING_SUMS if k in x):
             shape = (-1,) + (1,) * (x[key].ndim - 1)
             extra[key][mi] = x[key][mi] * scale.reshape(shape)
         sign = np.where(np.sum(model.directions[mi] * observed.directions[oi], axis=1) >= 0, 1.0, -1.0)

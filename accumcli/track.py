@@ -862,7 +862,7 @@ class PoseTracker:
                                 f"(needs {p.min_support_fraction:.0%})")
             if ransac.reason:
                 reacquisition = f"re-acquisition: {ransac.reason}"
-        predicted = self.predict(frame.timestamp_ns) if self.history else None
+        predicted = self.predict(frame.timestamp_ns)
         for c in candidates:
             why = (self._implausible(c, frame.timestamp_ns, predicted)
                    if c.status == "tracked" and T_guess is None else "")

@@ -42,17 +42,15 @@ def score(seed: int) -> dict:
     exact = recording(f"motion_exact_{seed}", frames=24, seed=seed, scene="random")
     noisy = recording(f"motion_noisy_{seed}", frames=24, seed=seed, scene="random", **NOISE)
     truth = read_truth(exact.replace(".mcap", ".truth.json"))
+    runs = [("exact", exact, "gripper"), ("noisy", noisy, "gripper"), ("tracked", noisy, "tracked")]
+    runs += [(name, recording(f"motion_{name}_{seed}", frames=24, seed=seed, scene="random", **noise), "gripper")
+             for name, noise in PERTURBED.items()]
     out = {}
-    for name, path, motion in (("exact", exact, "gripper"), ("noisy", noisy, "gripper"),
-                               ("tracked", noisy, "tracked")):
+    for name, path, motion in runs:
         t0 = time.perf_counter()
         model = accumulate_recording(path, params=AccumulateParams(motion=motion)).model
         out[f"{name}_s"] = time.perf_counter() - t0
         e = evaluate_model(model, truth)
-        out[name] = (e["precision"], e["completeness"])
-    for name, noise in PERTURBED.items():
-        path = recording(f"motion_{name}_{seed}", frames=24, seed=seed, scene="random", **noise)
-        e = evaluate_model(accumulate_recording(path).model, truth)
         out[name] = (e["precision"], e["completeness"])
     for name in ("tracked", *PERTURBED):
         out[f"{name}_shortfall"] = max(out["exact"][0] - out[name][0], out["exact"][1] - out[name][1])
