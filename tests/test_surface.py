@@ -40,3 +40,24 @@ def test_print_on_a_face_is_on_the_body_and_the_floor_is_not():
     assert on_body(segments, faces, support_face=bottom).tolist() == [True, False, False, False, True]
     scores = surface_scores(segments, faces, support_face=bottom)
     assert scores["surface_precision"] == 0.4 and abs(scores["surface_background"] - 0.6) < 1e-12
+
+
+def test_a_support_face_that_faces_the_cameras_is_named_and_the_hidden_one_proposed():
+    """Cameras 0.5 m above the box, looking down at it from 0 to 40 degrees off vertical: the
+    bottom (face 4) is hidden in every pose, the top (face 5) faces them in every one."""
+    from scipy.spatial.transform import Rotation
+
+    from accumcli.geometry import invert, make_transform
+    from accumcli.surface import facing_camera, support_face_problem
+
+    faces, poses = _box_faces(), []
+    for tilt in (0.0, 20.0, 40.0):
+        R_object_camera = Rotation.from_euler("x", 180 - tilt, degrees=True).as_matrix()   # optical axis down
+        eye = np.array([0.05, 0.05, 0.05]) - 0.5 * R_object_camera[:, 2]
+        poses.append(invert(make_transform(R_object_camera, eye)))
+    poses = np.array(poses)
+    assert np.all(facing_camera(faces[4], poses) < -0.7) and np.all(facing_camera(faces[5], poses) > 0.7)
+    assert support_face_problem(faces, 4, poses) is None
+    problem = support_face_problem(faces, 5, poses)
+    assert "support face 5 faces the cameras in 100%" in problem and "try --support-face 4" in problem
+    assert support_face_problem(faces, 5, np.zeros((0, 4, 4))) is None

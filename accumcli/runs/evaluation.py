@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -11,11 +12,12 @@ from ..evaluate import Tolerances, evaluate_frames, evaluate_model, pose_errors
 from ..funnel import funnel
 from ..model_io import check_kind, read_frames, read_model, read_poses, read_truth
 from ..outputs import OutputSet
-from ..surface import faces_of, surface_scores
+from ..surface import faces_of, support_face_problem, surface_scores
 from .base import FrameRange
 from .checks import check_truth_matches, check_truth_times
 
 TIME_TOLERANCE_NS = 1_000_000
+log = logging.getLogger("accumcli")
 
 
 def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: FrameRange = FrameRange(),
@@ -37,6 +39,9 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
         if faces:
             if support_face is not None and not 0 <= support_face < len(faces):
                 raise InputError(f"{truth_path}: no face {support_face} (the truth has {len(faces)} faces)")
+            problem = None if support_face is None else support_face_problem(faces, support_face, truth.poses)
+            if problem:
+                log.warning("%s: %s", truth_path, problem)
             figures.update(surface_scores(model, faces, tol, support_face))
         elif support_face is not None:
             raise InputError(f"{truth_path}: the truth has no faces, so no support face {support_face}")
