@@ -97,7 +97,7 @@ def extraction_options(func):
                      help="Length of a local segment, pixels."),
         click.option("--gradient-threshold", type=click.FloatRange(0.1, 100.0), default=3.0, show_default=True,
                      help="Edge gradient threshold, grey levels per pixel."),
-        click.option("--critical-angle", type=click.FloatRange(0.0, 45.0), default=12.0, show_default=True,
+        click.option("--critical-angle", type=click.FloatRange(0.0, 45.0), default=8.0, show_default=True,
                      help="Segments closer than this to the epipolar direction (degrees) are not matched "
                           "along the rows."),
         click.option("--critical-ends/--no-critical-ends", default=True, show_default=True,

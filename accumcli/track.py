@@ -27,7 +27,10 @@ least ``min_inliers`` distances (and ``min_inlier_fraction`` of those measured) 
 are at most ``max_std_deg`` and ``max_std_mm`` on every axis, and the coverage (the share of the visible
 model's sample points on an edge in both images, i.e. at the pose's disparity, each weighted by
 ``expected_weights``) is at least
-``min_coverage``, and at least ``min_shown`` of the model's accepted segments are expected in view
+``min_coverage`` (0.45: at the true poses of the tracking scoreboard's 253 frames with exact truth the
+coverage is under 0.5 on four of them (0.468 to 0.498; on dev_steps_track faces as light as the
+background hide their edges), which 0.5 lost, and model changes moved such frames between 'tracked' and
+'lost'; with 0.45 the scoreboard has no false frame and the wrong model is lost everywhere), and at least ``min_shown`` of the model's accepted segments are expected in view
 (their ``expected_weights`` summed: a handful of segments can line up with any edges, as the
 chessboard's grid did on sim_box from a pose that showed under 1 % of it); otherwise ``lost``
 (``judge``). ``PoseTracker`` adapts the RMS and inlier-share
@@ -106,7 +109,7 @@ class TrackParams:
     converged_rad: float = 1e-4              # a Gauss-Newton step smaller than this (0.006 deg) and
     converged_m: float = 1e-5                # 0.01 mm ends the level: far below the poses' std
     level_slack: float = 0.05                # a level's pose is kept unless its coverage falls by more
-    min_coverage: float = 0.5                # of the visible model's points on an edge in both images
+    min_coverage: float = 0.45               # of the visible model's points on an edge in both images
     min_shown: float = 0.02                  # share of the model's accepted segments expected in view
     max_std_deg: float = 0.3                 # of the last Gauss-Newton step, per axis: the pose is determined
     max_std_mm: float = 1.0

@@ -11,7 +11,7 @@ error the median of |error| is 0.67 sigma: a bin whose median error sits far abo
 sigma is too small, which the accumulator's gates and weights then trust. Then per recording the
 median signed depth offset (positive: farther from the cameras than the truth): a calibration or a
 truth that is off shows there as an offset shared by every segment (the teabox: -3.0 mm against its
-peer tracker's poses, every other row within 0.13 mm).
+peer tracker's poses, every other row within 0.1 mm).
 """
 
 from __future__ import annotations
