@@ -32,11 +32,11 @@ Entities are ``Segments`` in the object frame with running sums in ``extra``:
   planes whose intersection is the direction, as sure as a wide-baseline
   triangulation (averaging keeps the errors, which lie along each view's
   ray). Measured with ``make suite`` (19 rows): accumulated precision median
-  0.945 -> 0.953 (higher on 14 rows), completeness 0.541 -> 0.546, no row
-  worse beyond the noise; but the tracking scoreboard, whose zero false
-  frames are known to move with any change of the models, then has two
-  (sim_201 10.5 mm, dev_steps_track 5.9 deg), so it is not the default until
-  tracking holds with it. It trusts the poses to ``pose_rotation_sigma_deg``:
+  0.945 -> 0.955 (higher on 14 rows, lower on one by 0.005), completeness
+  median 0.568 both; but the tracking scoreboard, whose zero false frames are
+  known to move with any change of the models, then has one (dev_steps_track,
+  3.7 deg; with the 12-degree critical angle of before, two), so it is not
+  the default until tracking holds with it. It trusts the poses to ``pose_rotation_sigma_deg``:
   with ``--motion tracked`` on poses wrong by 1.5 deg / 4 mm (``make
   motion``) the worst shortfall grew from 0.055 to 0.113;
 - along the line, the segment covers the union of its extent and the merged
