@@ -36,9 +36,9 @@ Entities are ``Segments`` in the object frame with running sums in ``extra``:
   median 0.568 both; but the tracking scoreboard, whose zero false frames are
   known to move with any change of the models, then has one (dev_steps_track,
   3.7 deg; with the 12-degree critical angle of before, two), so it is not
-  the default until tracking holds with it. It trusts the poses to ``pose_rotation_sigma_deg``:
-  with ``--motion tracked`` on poses wrong by 1.5 deg / 4 mm (``make
-  motion``) the worst shortfall grew from 0.055 to 0.113;
+  the default until tracking holds with it. It trusts the poses to
+  ``pose_rotation_sigma_deg``: with ``--motion tracked`` on poses wrong by
+  1.5 deg / 4 mm (``make motion``) the worst shortfall grew from 0.055 to 0.113;
 - along the line, the segment covers the union of its extent and the merged
   observation's, its centre re-placed at the middle of that union: an
   observation of the same length shifted by 4 mm along the line moves the

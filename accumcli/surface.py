@@ -91,10 +91,11 @@ def support_face_problem(faces: list[Face], support_face: int, poses: np.ndarray
     if not len(poses):
         return None
     facing = np.array([facing_camera(face, poses) for face in faces])        # (F, P)
-    if np.mean(facing[support_face] > 0) <= 0.5:
+    share = float(np.mean(facing[support_face] > 0))
+    if share <= 0.5:
         return None
     hidden = int(np.argmin(np.median(facing, axis=1)))
-    return (f"support face {support_face} faces the cameras in {np.mean(facing[support_face] > 0):.0%} of the "
+    return (f"support face {support_face} faces the cameras in {share:.0%} of the "
             f"truth's poses, so the object cannot stand on it; face {hidden} faces away the most "
             f"(try --support-face {hidden})")
 

@@ -27,10 +27,11 @@ least ``min_inliers`` distances (and ``min_inlier_fraction`` of those measured) 
 are at most ``max_std_deg`` and ``max_std_mm`` on every axis, and the coverage (the share of the visible
 model's sample points on an edge in both images, i.e. at the pose's disparity, each weighted by
 ``expected_weights``) is at least
-``min_coverage`` (0.45: at the true poses of the tracking scoreboard's 253 frames with exact truth the
-coverage is under 0.5 on four of them (0.468 to 0.498; on dev_steps_track faces as light as the
-background hide their edges), which 0.5 lost, and model changes moved such frames between 'tracked' and
-'lost'; with 0.45 the scoreboard has no false frame and the wrong model is lost everywhere), and at least ``min_shown`` of the model's accepted segments are expected in view
+``min_coverage`` (0.45: at the true poses of the tracking scoreboard's 253 frames with exact truth
+the coverage is under 0.5 on four of them, 0.468 to 0.498, where faces as light as the background
+hide their edges; 0.5 lost those, and model changes moved such frames between 'tracked' and 'lost';
+with 0.45 the scoreboard has no false frame and the wrong model is lost everywhere), and at least
+``min_shown`` of the model's accepted segments are expected in view
 (their ``expected_weights`` summed: a handful of segments can line up with any edges, as the
 chessboard's grid did on sim_box from a pose that showed under 1 % of it); otherwise ``lost``
 (``judge``). ``PoseTracker`` adapts the RMS and inlier-share

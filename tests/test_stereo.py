@@ -136,3 +136,21 @@ def test_given_gradients_are_reused_only_as_far_as_the_parameters_match():
     assert other_threshold.edges.sum() > given.edges.sum()                 # its own Canny: the noise too
     other_blur = Gradients.of(image, LineParams(blur_sigma=2.0), reuse=given)
     assert other_blur.gx is not given.gx and np.abs(other_blur.gx).max() < np.abs(given.gx).max()
+
+
+def test_edge_ten_degrees_off_the_rows_is_matched_along_them():
+    """The critical angle (8 degrees, ``StereoParams``) lets an edge 10 degrees off the epipolar
+    lines be matched along the rows, without its ends: its disparity is defined well enough there."""
+    from dataclasses import replace
+
+    square, corners = rotated_square((0.0, 0.0), 0.05, 10.0, 0.5)
+    frame = render_pair([square], seed=2)
+    params = ExtractParams(stereo=replace(ExtractParams().stereo, critical_by_ends=False))
+    seg = extract_frame(frame, params).segments
+    masks, sides = _sides_along_rows(seg, corners)
+    for on, (a, b) in zip(masks, sides):
+        u = (b - a) / np.linalg.norm(b - a)
+        angle = np.degrees(np.arccos(np.clip(np.abs(seg.directions[on] @ u), 0, 1)))
+        offset = np.linalg.norm(np.cross(seg.centers[on] - a, u), axis=1)
+        print(f"side: {on.sum()} segments, max offset {1000 * offset.max():.2f} mm, max angle {angle.max():.2f} deg")
+        assert on.sum() >= 4 and offset.max() < 0.0015 and angle.max() < 3.0
