@@ -98,7 +98,7 @@ class LineModelParams:
     lateral_sigma_px: float = 0.3
     max_weight: float = 20.0
     aspect_margin_deg: float = 15.0
-    critical_angle_deg: float = 8.0           # the extraction's (AccumulateParams keeps them equal)
+    critical_angle_deg: float = 8.0   # AccumulateParams sets it to StereoParams.critical_angle_deg
     duplicate_shift: float = 0.25     # fraction of a length; closer centres along the line are duplicates
     max_views: int = 6                # viewing directions kept per segment
     view_step_deg: float = 10.0       # a new viewing direction is kept if this far from the stored ones

@@ -9,9 +9,11 @@ Matching, in rectified images (epipolar lines are image rows):
   ``critical`` triangulates those whose edges end where disparity is defined.
   8 degrees, measured on ``make suite`` (19 rows; the paper names no angle): against 12,
   accumulated completeness median 0.541 -> 0.568 and worst row 0.159 -> 0.229 (sim_100, sim_105,
-  sim_107 and dev_clutter gain 0.03 to 0.12), precision median 0.945 both; 10 gave 0.550 / 0.222,
-  6 lowered the precision median to 0.926. The real teabox, whose rig toes in, moved within the
-  scoreboard's noise the other way (surface precision 0.396 -> 0.368, completeness 0.573 -> 0.551).
+  sim_107 and dev_clutter gain 0.03 to 0.12, sim_110 loses 0.03), precision median 0.945 both;
+  10 gave completeness median 0.550 and worst 0.222, 6 lowered the precision median to 0.926. The
+  cost: single-frame near-object precision median 0.804 -> 0.791 (more segments, a few of them
+  wrong, which accumulation removes), and the real teabox moved the other way by about the
+  scoreboard's noise (surface precision 0.396 -> 0.368, completeness 0.573 -> 0.551).
 - Candidates: right segments whose extent covers the left centre's row, with
   the disparity at that row in the range given by ``min_depth_m`` and
   ``max_depth_m``, the same gradient polarity, and directions within

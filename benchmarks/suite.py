@@ -93,7 +93,7 @@ def score(row: Row, view_planes: bool = False) -> dict:
     )
 
     options = RecordingOptions(object_frame=row.object_frame)
-    out = CACHE / "suite"
+    out = CACHE / ("suite_view_planes" if view_planes else "suite")   # the variant's files apart (make uncertainty)
     out.mkdir(parents=True, exist_ok=True)
     frames_file, model_file = out / f"{row.name}.frames.jsonl", out / f"{row.name}.model.json"
     extract_recording(row.path, str(frames_file), options=options, with_2d=True)

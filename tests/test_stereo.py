@@ -140,7 +140,8 @@ def test_given_gradients_are_reused_only_as_far_as_the_parameters_match():
 
 def test_edge_ten_degrees_off_the_rows_is_matched_along_them():
     """The critical angle (8 degrees, ``StereoParams``) lets an edge 10 degrees off the epipolar
-    lines be matched along the rows, without its ends: its disparity is defined well enough there."""
+    lines be matched along the rows, without its ends: its disparity is defined well enough there
+    (within 2 mm and 3 degrees; at 12 degrees the sides are critical and not found)."""
     from dataclasses import replace
 
     square, corners = rotated_square((0.0, 0.0), 0.05, 10.0, 0.5)
@@ -152,5 +153,5 @@ def test_edge_ten_degrees_off_the_rows_is_matched_along_them():
         u = (b - a) / np.linalg.norm(b - a)
         angle = np.degrees(np.arccos(np.clip(np.abs(seg.directions[on] @ u), 0, 1)))
         offset = np.linalg.norm(np.cross(seg.centers[on] - a, u), axis=1)
-        print(f"side: {on.sum()} segments, max offset {1000 * offset.max():.2f} mm, max angle {angle.max():.2f} deg")
-        assert on.sum() >= 4 and offset.max() < 0.0015 and angle.max() < 3.0
+        print(f"side: {on.sum()} segments, max offset {1000 * offset.max():.2f} mm, {angle.max():.2f} deg")
+        assert on.sum() >= 4 and offset.max() < 0.002 and angle.max() < 3.0    # seeds 0-4: up to 1.48 mm

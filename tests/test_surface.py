@@ -42,22 +42,57 @@ def test_print_on_a_face_is_on_the_body_and_the_floor_is_not():
     assert scores["surface_precision"] == 0.4 and abs(scores["surface_background"] - 0.6) < 1e-12
 
 
-def test_a_support_face_that_faces_the_cameras_is_named_and_the_hidden_one_proposed():
-    """Cameras 0.5 m above the box, looking down at it from 0 to 40 degrees off vertical: the
-    bottom (face 4) is hidden in every pose, the top (face 5) faces them in every one."""
+def _cameras_above() -> np.ndarray:
+    """(3, 4, 4) T_camera_object of cameras 0.5 m above the box of ``_box_faces``, looking down at it
+    from 0 to 40 degrees off vertical."""
     from scipy.spatial.transform import Rotation
 
     from accumcli.geometry import invert, make_transform
-    from accumcli.surface import facing_camera, support_face_problem
 
-    faces, poses = _box_faces(), []
+    poses = []
     for tilt in (0.0, 20.0, 40.0):
         R_object_camera = Rotation.from_euler("x", 180 - tilt, degrees=True).as_matrix()   # optical axis down
         eye = np.array([0.05, 0.05, 0.05]) - 0.5 * R_object_camera[:, 2]
         poses.append(invert(make_transform(R_object_camera, eye)))
-    poses = np.array(poses)
+    return np.array(poses)
+
+
+def test_a_support_face_that_faces_the_cameras_is_named_and_the_hidden_one_proposed():
+    """The bottom (face 4) is hidden from cameras above in every pose, the top (face 5) faces them."""
+    from accumcli.surface import facing_camera, support_face_problem
+
+    faces, poses = _box_faces(), _cameras_above()
     assert np.all(facing_camera(faces[4], poses) < -0.7) and np.all(facing_camera(faces[5], poses) > 0.7)
     assert support_face_problem(faces, 4, poses) is None
     problem = support_face_problem(faces, 5, poses)
     assert "support face 5 faces the cameras in 100%" in problem and "try --support-face 4" in problem
     assert support_face_problem(faces, 5, np.zeros((0, 4, 4))) is None
+    # a truth whose only face faces the cameras proposes nothing
+    assert "no face of the truth faces away" in support_face_problem(faces[5:], 0, poses)
+
+
+def test_eval_warns_of_a_support_face_that_faces_the_cameras(tmp_path, caplog):
+    import json
+
+    from accumcli.geometry import quat_from_transform
+    from accumcli.model_io import write_model
+    from accumcli.runs import evaluate_file
+
+    faces, poses = _box_faces(), _cameras_above()
+    model = tmp_path / "model.json"
+    write_model(model, _segments([[0.05, 0.05, 0.1]], [[1, 0, 0]]))
+    truth = tmp_path / "box.truth.json"
+    truth.write_text(json.dumps({
+        "format": "accum.truth/1", "object_frame": "object", "camera_frame": "camera_left",
+        "edges": [{"a": [0, 0, 0.1], "b": [0.1, 0, 0.1]}],
+        "faces": [{"vertices": f.vertices.tolist(), "normal": f.normal.tolist()} for f in faces],
+        "poses": [{"timestamp_ns": k, "translation": t.tolist(), "rotation_xyzw": q.tolist()}
+                  for k, (t, q) in enumerate(map(quat_from_transform, poses))]}))
+    with caplog.at_level("WARNING", logger="accumcli"):
+        figures = evaluate_file(str(model), str(truth), support_face=5)
+    assert figures["surface_precision"] == 1.0
+    assert "support face 5 faces the cameras in 100%" in caplog.text and "try --support-face 4" in caplog.text
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="accumcli"):
+        evaluate_file(str(model), str(truth), support_face=4)
+    assert "support face" not in caplog.text
