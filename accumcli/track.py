@@ -802,6 +802,21 @@ class PoseTracker:
         return (f"{rotation:.0f} deg and {translation * 1000:.0f} mm from the motion prediction "
                 f"(at most {p.max_jump_deg:.0f} deg and {p.max_jump_m * 1000:.0f} mm)")
 
+    def _restarts(self, judged: list[PoseEstimate], frame: StereoFrame, grads) -> list[PoseEstimate]:
+        """Refinements from the best of ``judged`` turned by +-``restart_deg`` (``_perturbed``) that end
+        at a pose distinct from every judged one: one that ends where a refinement already ended
+        judges the same pose again, a new candidate only where it found another minimum."""
+        p = self.params
+        if not p.restart_deg:
+            return []
+        found = []
+        for T in _perturbed(max(judged, key=_rank).T_camera_object, np.radians(p.restart_deg)):
+            restarted = _refine(self._accepted, frame, T, p, grads)
+            restarted.method = "restart"
+            if all(_distinct(restarted, c, p) for c in judged):
+                found.append(restarted)
+        return found
+
     def update(self, frame: StereoFrame, T_guess: np.ndarray | None = None,
                observe: Callable[[], Segments] | None = None,
                gradients: tuple[Gradients, Gradients] | None = None) -> PoseEstimate:
@@ -850,15 +865,7 @@ class PoseTracker:
                                p.reacquire_tukey_px)
             wide.method = "wide"
             candidates.append(wide)
-            judged = list(candidates)
-            best_so_far = max(judged, key=_rank)
-            for T in _perturbed(best_so_far.T_camera_object, np.radians(p.restart_deg)) if p.restart_deg else []:
-                restarted = _refine(self._accepted, frame, T, p, grads)
-                restarted.method = "restart"
-                # one that ends where a refinement already ended judges the same pose again: it
-                # is a new candidate only where it found another minimum
-                if all(_distinct(restarted, c, p) for c in judged):
-                    candidates.append(restarted)
+            candidates += self._restarts(candidates, frame, grads)
         reacquisition = "" if observe is not None else "no re-acquisition (nothing to observe)"
         ran = False
         if (reacquiring or not any(c.status == "tracked" for c in candidates)) and observe is not None:

@@ -45,9 +45,7 @@ class Row:
     support_face: int | None = None   # teabox: the box stands on a board that moves with it (its README)
 
 
-# The face the teabox stands on. Its README names face 0 (normal (0, -1, 0)), but by the recording's own
-# poses face 0 turns towards the cameras in every frame and face 1 (normal (0, 0, -1)) away from them in
-# every frame (``accumcli.surface.support_face_problem``; accum eval warns): face 1 is the bottom.
+# The face the teabox stands on by its own poses, not the face 0 its README names (accumcli.surface).
 TEABOX_SUPPORT_FACE = 1
 
 

@@ -80,23 +80,22 @@ def table(error: np.ndarray, sigma: np.ndarray, bins, unit: str, limit: float) -
 def main() -> int:
     from suite import real_and_independent_rows, simulated_rows
 
-    found, names = [], []
+    found = {}      # recording name -> its errors
     for row in simulated_rows() + real_and_independent_rows():
         frames = CACHE / "suite" / f"{row.name}.frames.jsonl"
         if frames.exists():
-            found.append(errors(str(frames), row.truth))
-            names.append(row.name)
+            found[row.name] = errors(str(frames), row.truth)
     if not found:
         print("no frames files in out/bench/suite/: run make suite first", file=sys.stderr)
         return 1
-    e = np.concatenate(found)
+    e = np.concatenate(list(found.values()))
     print(f"{len(found)} recordings: {np.isfinite(e[:, 0]).sum()} segments within {NEAR_M * 1000:g} mm of an edge "
           f"(direction), {np.isfinite(e[:, 2]).sum()} on an edge's viewing rays (depth)\n")
     print("\n".join(table(e[:, 0], e[:, 1], DIRECTION_BINS_DEG, "deg", 10.0)))
     print()
     print("\n".join(table(e[:, 2], e[:, 3], DEPTH_BINS_MM, "mm", 4.0)))
     print("\n| recording | segments on rays | median signed depth offset (mm) |\n|---|---|---|")
-    for name, rows in zip(names, found):
+    for name, rows in found.items():
         depth = rows[np.isfinite(rows[:, 2]), 2]
         print(f"| {name} | {len(depth)} | {np.median(depth):+.2f} |" if len(depth) else f"| {name} | 0 | - |")
     return 0

@@ -31,7 +31,7 @@ def test_frames_whose_refinement_stops_off_the_truth_are_found_by_restarts():
                   for t, T, s in zip(track.times_ns, track.poses, track.status)]
         return track.status, errors
 
-    status, errors = run(None)
+    status, _ = run(None)
     assert status[2:5] == ["lost"] * 3
     status, errors = run(5.0)
     assert status == ["tracked"] * 6
