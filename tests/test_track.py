@@ -345,6 +345,24 @@ def test_decide_calls_two_equally_good_distinct_poses_ambiguous_and_keeps_both()
     assert decide([_estimate(np.full((4, 4), np.nan), 0.9)]) is None
 
 
+def test_a_restart_must_beat_the_unverified_poses_too():
+    """A restart explores where no refinement verified: a distinct pose that the same images cover
+    about as well, verified or not, makes it ambiguous (sim_206 frame 26 of the tracking scoreboard
+    with a fuller model: a restart 6.4 deg off verified at 0.60, the refinement 5 deg away covered 0.56)."""
+    from accumcli.track import decide
+
+    turned = make_transform(Rotation.from_rotvec([0, np.radians(6.0), 0]).as_matrix(), [0.0, 0.0, 0.5])
+    restart = _estimate(T_FRONT, 0.60)
+    restart.method = "restart"
+    assert decide([restart, _estimate(turned, 0.56, "lost")]).status == "ambiguous"
+    restart = _estimate(T_FRONT, 0.76)
+    restart.method = "restart"
+    clear = decide([restart, _estimate(turned, 0.55, "lost")])
+    assert clear.status == "tracked" and clear.margin == pytest.approx(0.21)
+    refined = decide([_estimate(T_FRONT, 0.60), _estimate(turned, 0.56, "lost")])   # not a restart: as before
+    assert refined.status == "tracked"
+
+
 def test_a_model_of_another_object_is_lost(noisy_pair, model_of_exact):
     """The model scaled by 1.4 about its centre (another box of the same shape) from the true first pose:
     the images do not verify it; every frame 'lost'."""
