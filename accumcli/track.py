@@ -717,10 +717,12 @@ def _distinct(a: PoseEstimate, b: PoseEstimate, params: TrackParams) -> bool:
 def decide(candidates: list[PoseEstimate], params: TrackParams = TrackParams()) -> PoseEstimate | None:
     """The best of ``candidates`` (by ``_rank``; None if none has a finite pose) with its ``margin``:
     its coverage minus that of the best verified candidate at a distinct pose (more than
-    ``distinct_deg`` or ``distinct_m`` away; 0 when there is none; for a restart's pose, the best
-    candidate at a distinct pose, verified or not: restarts search where nothing verified, and on
-    the tracking scoreboard a restart 6.4 deg off verified at coverage 0.60 where the refinement 5
-    deg from it covered 0.56). A verified best whose margin is
+    ``distinct_deg`` or ``distinct_m`` away; 0 when there is none). Rivals verified or not: of a
+    restart's pose, every distinct candidate (restarts search where nothing verified: on the
+    tracking scoreboard a restart 6.4 deg off verified at coverage 0.60 where the refinement 5 deg
+    from it covered 0.56); of any pose, a symmetric twin (sim_201: a re-acquisition slid 10.3 mm
+    along the model's parallel edges verified at 0.895, its slid twins, failed by their standard
+    deviations of 0.32 to 0.38 deg, covered 0.85 and 0.91). A verified best whose margin is
     under ``min_margin`` is 'ambiguous', the verified distinct poses within the margin in its
     ``alternatives``: the images cannot tell them apart (a symmetric model, e.g. the chessboard's
     half turn)."""
@@ -732,8 +734,9 @@ def decide(candidates: list[PoseEstimate], params: TrackParams = TrackParams()) 
     rivals = []
     for other in ranked[1:]:
         # a restart's pose (``PoseTracker._restarts``) explores where no refinement verified: every
-        # distinct pose refined on the same images is its rival, verified or not
-        rival = other.status == "tracked" or best.method == "restart"
+        # distinct pose refined on the same images is its rival, verified or not; so is a symmetric
+        # twin (``PoseTracker.symmetries``): covering as much, it is as good whatever else fails it
+        rival = other.status == "tracked" or best.method == "restart" or other.method == "symmetry"
         if rival and all(_distinct(other, known, params) for known in [best, *rivals]):
             rivals.append(other)
     best.margin = best.coverage - max((r.coverage for r in rivals), default=0.0)
@@ -745,6 +748,40 @@ def decide(candidates: list[PoseEstimate], params: TrackParams = TrackParams()) 
         best.reason = (f"a pose {rotation:.0f} deg and {translation * 1000:.0f} mm away covers "
                        f"{close[0].coverage:.2f} (this one {best.coverage:.2f}; margin needs {params.min_margin})")
     return best
+
+
+def slides(accepted: Segments, distinct_m: float, max_m: float = 0.04, step_m: float = 0.002,
+           axis_deg: float = 10.0) -> list[np.ndarray]:
+    """Translations S (4, 4), object frame, along which the model slides onto itself: for the direction
+    shared (within ``axis_deg``) by at least half of the ``accepted`` segments, the farthest shift
+    (up to ``max_m``, in ``step_m`` steps) that still brings half of them onto accepted segments
+    (``metric.candidate_pairs``: a segment matches itself shifted by up to half its length), and half
+    of it if that is distinct (beyond ``distinct_m``), both ways. Why: a model made mostly of parallel
+    edges (an extrusion whose end edges were not accumulated) is pinned along them by its few other
+    segments only; on the tracking scoreboard (sim_201, 91 % of the accepted segments along one axis)
+    a re-acquisition verified a pose slid 10.3 mm along them, tracked with a standard deviation of
+    0.29 deg against the limit's 0.3. Tried as symmetric twins, such a slide makes it 'ambiguous'
+    where the images cannot tell."""
+    from .metric import MetricThresholds, candidate_pairs
+
+    n = len(accepted)
+    if n < 4:
+        return []
+    d = accepted.directions
+    axis = d[np.argmax(accepted.lengths)]
+    parallel = np.abs(d @ axis) >= np.cos(np.radians(axis_deg))
+    if parallel.sum() < 0.5 * n:
+        return []
+    axis = np.linalg.svd(d[parallel], full_matrices=False)[2][0]     # their mean undirected direction
+    farthest = 0.0
+    for shift in np.arange(distinct_m + step_m, max_m + 1e-9, step_m):
+        _, j, _ = candidate_pairs(accepted.centers, d, accepted.lengths, accepted.centers + shift * axis, d,
+                                  accepted.lengths, MetricThresholds())
+        if len(np.unique(j)) < 0.5 * n:
+            break
+        farthest = shift
+    shifts = [t for t in (farthest, farthest / 2) if t > distinct_m]
+    return [make_transform(np.eye(3), sign * t * axis) for t in shifts for sign in (1.0, -1.0)]
 
 
 @dataclass
@@ -765,7 +802,7 @@ class PoseTracker:
         """The model's near-symmetries: rigid transforms S (4, 4), object frame, more than
         ``distinct_deg`` / ``distinct_m`` from the identity, that bring at least half of the accepted
         segments onto accepted segments (``ransac_pose`` of the model onto itself; computed once),
-        and their inverses.
+        and their inverses; and the model's ``slides`` along its parallel segments.
         A re-acquired pose T also tries T S: the images must tell them apart, or it is 'ambiguous'."""
         if self._symmetries is None:
             accepted = self._accepted
@@ -773,7 +810,9 @@ class PoseTracker:
             identity = PoseEstimate(np.eye(4), 0.0, 0, 0, "")
             found = [T for T, support in (found.hypotheses if found else [])
                      if support >= 0.5 * len(accepted) and _distinct(PoseEstimate(T, 0.0, 0, 0, ""), identity, self.params)]
-            self._symmetries = found + [invert(T) for T in found]      # a shift by one square and back
+            # a shift by one square and back; and slides along parallel segments, which RANSAC over
+            # pairs of segments at 30 to 90 degrees cannot propose
+            self._symmetries = found + [invert(T) for T in found] + slides(accepted, self.params.distinct_m)
         return self._symmetries
 
     def predict(self, time_ns: int) -> list[np.ndarray]:

@@ -361,6 +361,9 @@ def test_a_restart_must_beat_the_unverified_poses_too():
     assert clear.status == "tracked" and clear.margin == pytest.approx(0.21)
     refined = decide([_estimate(T_FRONT, 0.60), _estimate(turned, 0.56, "lost")])   # not a restart: as before
     assert refined.status == "tracked"
+    twin = _estimate(turned, 0.62, "lost")     # a symmetric twin covers as much: the images cannot tell
+    twin.method = "symmetry"
+    assert decide([_estimate(T_FRONT, 0.60), twin]).status == "ambiguous"
 
 
 def test_a_model_of_another_object_is_lost(noisy_pair, model_of_exact):
@@ -670,3 +673,29 @@ def test_kernels_compile_without_a_cache_when_there_is_nowhere_to_write_it(monke
         return 2 * x
 
     assert jit.kernel(twice)(21) == 42
+
+
+def _segments(centers, directions, length=0.02) -> Segments:
+    n = len(centers)
+    return Segments("gripper", np.asarray(centers, float), np.asarray(directions, float), np.full(n, length),
+                    np.ones(n), np.full(n, 3, np.int64))
+
+
+def test_a_model_of_parallel_edges_slides_onto_itself_and_a_box_does_not():
+    """``slides``: an extrusion whose end edges were not accumulated (9 of 10 segments along y) slides
+    along y onto itself, so a re-acquisition also tries the slid poses (symmetric twins); a box's
+    edges in three directions pin it."""
+    from accumcli.track import slides
+
+    rng = np.random.default_rng(1)
+    along = [[x, y, z] for x, z in ((0, 0), (0.03, 0), (0, 0.03), (0.03, 0.03), (0.015, -0.01))
+             for y in (0.0, 0.025)][:9]
+    extrusion = _segments(along + [[0.015, 0.05, 0.0]], [[0, 1, 0]] * 9 + [[1, 0, 0]])
+    shifts = [S[:3, 3] for S in slides(extrusion, 0.005)]
+    assert shifts, "no slide found"
+    for t in shifts:
+        assert abs(t[0]) < 1e-9 and abs(t[2]) < 1e-9 and 0.005 < abs(t[1]) <= 0.04, t
+    assert len(PoseTracker(extrusion).symmetries()) >= len(shifts)     # tried as twins on re-acquisition
+    box_centers = rng.uniform(-0.03, 0.03, (12, 3))
+    box = _segments(box_centers, np.repeat(np.eye(3), 4, axis=0))
+    assert slides(box, 0.005) == []
