@@ -166,6 +166,7 @@ class PoseEstimate:
     information: np.ndarray | None = None     # (6, 6) J^T W J / sigma^2 of the images, increments about pivot
     pivot: np.ndarray | None = None           # (3,) metres, camera frame: the visible model's centroid
     shown: float = 1.0                        # share of the model's accepted segments expected in view
+    refuted: bool = False                     # lost by evidence beyond the images (motion, 3D support)
 
     def figures(self) -> dict:
         """The estimate's figures as JSON-ready extra fields of a poses.json entry."""
@@ -716,28 +717,28 @@ def _distinct(a: PoseEstimate, b: PoseEstimate, params: TrackParams) -> bool:
 
 def decide(candidates: list[PoseEstimate], params: TrackParams = TrackParams()) -> PoseEstimate | None:
     """The best of ``candidates`` (by ``_rank``; None if none has a finite pose) with its ``margin``:
-    its coverage minus that of the best verified candidate at a distinct pose (more than
-    ``distinct_deg`` or ``distinct_m`` away; 0 when there is none). Rivals verified or not: of a
-    restart's pose, every distinct candidate (restarts search where nothing verified: on the
-    tracking scoreboard a restart 6.4 deg off verified at coverage 0.60 where the refinement 5 deg
-    from it covered 0.56); of any pose, a symmetric twin (sim_201: a re-acquisition slid 10.3 mm
-    along the model's parallel edges verified at 0.895, its slid twins, failed by their standard
-    deviations of 0.32 to 0.38 deg, covered 0.85 and 0.91). A verified best whose margin is
-    under ``min_margin`` is 'ambiguous', the verified distinct poses within the margin in its
-    ``alternatives``: the images cannot tell them apart (a symmetric model, e.g. the chessboard's
-    half turn)."""
+    its coverage minus that of the best rival, a candidate at a distinct pose (more than
+    ``distinct_deg`` or ``distinct_m`` away; 0 when there is none). Rivals are the verified
+    candidates, and those that only the images failed (not ``refuted`` by the motion or by 3D
+    support): every one where the best was found searching after nothing verified ('wide',
+    'restart'), and symmetric twins ('symmetry') always: covering about as much, the images cannot
+    tell them from the best, whatever check they fail by a hair. (Found with the models of an
+    experiment not kept: a restart 6.4 deg off verified at coverage 0.60 where the refinement 5 deg
+    from it covered 0.56; a re-acquisition slid 10.3 mm along a model's parallel edges verified at
+    0.895 while its slid twins covered 0.85 and 0.91, failed by standard deviations of 0.32 and 0.38
+    deg.) A verified best whose margin is under ``min_margin`` is 'ambiguous', the rivals within the
+    margin in its ``alternatives`` (a symmetric model, e.g. the chessboard's half turn)."""
     finite = [c for c in candidates if np.isfinite(c.T_camera_object).all()]
     if not finite:
         return None
     ranked = sorted(finite, key=_rank, reverse=True)
     best = ranked[0]
     rivals = []
-    for other in ranked[1:]:
-        # a restart's pose (``PoseTracker._restarts``) explores where no refinement verified: every
-        # distinct pose refined on the same images is its rival, verified or not; so is a symmetric
-        # twin (``PoseTracker.symmetries``): covering as much, it is as good whatever else fails it
-        rival = other.status == "tracked" or best.method == "restart" or other.method == "symmetry"
-        if rival and all(_distinct(other, known, params) for known in [best, *rivals]):
+    exploring = best.method in ("wide", "restart")
+    for other in sorted(ranked[1:], key=lambda c: c.coverage, reverse=True):
+        images_fail = not other.refuted and (exploring or other.method == "symmetry")
+        if (other.status == "tracked" or images_fail) and all(_distinct(other, known, params)
+                                                                 for known in [best, *rivals]):
             rivals.append(other)
     best.margin = best.coverage - max((r.coverage for r in rivals), default=0.0)
     close = [r for r in rivals if best.coverage - r.coverage < params.min_margin]
@@ -752,36 +753,30 @@ def decide(candidates: list[PoseEstimate], params: TrackParams = TrackParams()) 
 
 def slides(accepted: Segments, distinct_m: float, max_m: float = 0.04, step_m: float = 0.002,
            axis_deg: float = 10.0) -> list[np.ndarray]:
-    """Translations S (4, 4), object frame, along which the model slides onto itself: for the direction
-    shared (within ``axis_deg``) by at least half of the ``accepted`` segments, the farthest shift
-    (up to ``max_m``, in ``step_m`` steps) that still brings half of them onto accepted segments
-    (``metric.candidate_pairs``: a segment matches itself shifted by up to half its length), and half
-    of it if that is distinct (beyond ``distinct_m``), both ways. Why: a model made mostly of parallel
-    edges (an extrusion whose end edges were not accumulated) is pinned along them by its few other
-    segments only; on the tracking scoreboard (sim_201, 91 % of the accepted segments along one axis)
-    a re-acquisition verified a pose slid 10.3 mm along them, tracked with a standard deviation of
-    0.29 deg against the limit's 0.3. Tried as symmetric twins, such a slide makes it 'ambiguous'
-    where the images cannot tell."""
-    from .metric import MetricThresholds, candidate_pairs
-
+    """Translations S (4, 4), object frame, by which the model slides onto itself along its parallel
+    segments: the direction shared (within ``axis_deg``) by the most ``accepted`` segments, if at
+    least half; along it, of the shifts beyond ``distinct_m`` up to ``max_m`` (``step_m`` apart), the
+    one that brings the most segments onto segments (``support_3d``, as for the RANSAC symmetries;
+    the middle one of a tie), if at least half; both ways. Why: a model made mostly of parallel edges (an extrusion whose end
+    edges were not accumulated) is pinned along them by its few other segments only, and RANSAC over
+    pairs of segments at 30 to 90 degrees cannot propose a slide. sim_201's model of the tracking
+    scoreboard has 91 % of its accepted segments along one axis and slides onto itself by 14 mm
+    (0.70 of them), the spacing of their pieces."""
     n = len(accepted)
     if n < 4:
         return []
     d = accepted.directions
-    axis = d[np.argmax(accepted.lengths)]
-    parallel = np.abs(d @ axis) >= np.cos(np.radians(axis_deg))
-    if parallel.sum() < 0.5 * n:
+    parallel = np.abs(d @ d.T) >= np.cos(np.radians(axis_deg))
+    members = parallel[np.argmax(parallel.sum(axis=1))]
+    if members.sum() < 0.5 * n:
         return []
-    axis = np.linalg.svd(d[parallel], full_matrices=False)[2][0]     # their mean undirected direction
-    farthest = 0.0
-    for shift in np.arange(distinct_m + step_m, max_m + 1e-9, step_m):
-        _, j, _ = candidate_pairs(accepted.centers, d, accepted.lengths, accepted.centers + shift * axis, d,
-                                  accepted.lengths, MetricThresholds())
-        if len(np.unique(j)) < 0.5 * n:
-            break
-        farthest = shift
-    shifts = [t for t in (farthest, farthest / 2) if t > distinct_m]
-    return [make_transform(np.eye(3), sign * t * axis) for t in shifts for sign in (1.0, -1.0)]
+    axis = np.linalg.svd(d[members], full_matrices=False)[2][0]     # their mean undirected direction
+    shifts = np.arange(distinct_m + step_m, max_m + 1e-9, step_m)
+    onto = np.array([support_3d(accepted, accepted, make_transform(np.eye(3), t * axis)) for t in shifts])
+    if onto.max() < 0.5 * n:
+        return []
+    tied = shifts[onto == onto.max()]           # within support_3d's reach of the best: their middle
+    return [make_transform(np.eye(3), sign * tied[len(tied) // 2] * axis) for sign in (1.0, -1.0)]
 
 
 @dataclass
@@ -812,7 +807,10 @@ class PoseTracker:
                      if support >= 0.5 * len(accepted) and _distinct(PoseEstimate(T, 0.0, 0, 0, ""), identity, self.params)]
             # a shift by one square and back; and slides along parallel segments, which RANSAC over
             # pairs of segments at 30 to 90 degrees cannot propose
-            self._symmetries = found + [invert(T) for T in found] + slides(accepted, self.params.distinct_m)
+            found += [invert(T) for T in found]
+            known = [PoseEstimate(T, 0.0, 0, 0, "") for T in found]
+            self._symmetries = found + [S for S in slides(accepted, self.params.distinct_m)
+                                        if all(_distinct(PoseEstimate(S, 0.0, 0, 0, ""), k, self.params) for k in known)]
         return self._symmetries
 
     def predict(self, time_ns: int) -> list[np.ndarray]:
@@ -931,23 +929,27 @@ class PoseTracker:
                     candidates.append(mirrored)
             accepted = self._accepted
             tree = cKDTree(observed.centers) if len(observed) else None
-            for c in candidates:
-                if c.status != "tracked":
+            for c in candidates:    # every pose: one the images failed may still be a rival (decide)
+                if not np.isfinite(c.T_camera_object).all():
                     continue
                 support = support_3d(accepted, observed, c.T_camera_object, tree)
                 in_view = int(visible(accepted, c.T_camera_object, frame.intrinsics, p.aspect_margin_deg).sum())
                 if support < p.min_support_fraction * max(in_view, 1):
-                    c.status = "lost"
-                    c.reason = (f"{support} of {in_view} model segments in view found a 3D counterpart "
-                                f"(needs {p.min_support_fraction:.0%})")
+                    c.refuted = True
+                    if c.status == "tracked":
+                        c.status = "lost"
+                        c.reason = (f"{support} of {in_view} model segments in view found a 3D counterpart "
+                                    f"(needs {p.min_support_fraction:.0%})")
             if ransac.reason:
                 reacquisition = f"re-acquisition: {ransac.reason}"
         predicted = self.predict(frame.timestamp_ns)
         for c in candidates:
             why = (self._implausible(c, frame.timestamp_ns, predicted)
-                   if c.status == "tracked" and T_guess is None else "")
+                   if T_guess is None and np.isfinite(c.T_camera_object).all() else "")
             if why:
-                c.status, c.reason = "lost", why
+                c.refuted = True
+                if c.status == "tracked":
+                    c.status, c.reason = "lost", why
         best = decide(candidates, p)
         if best is None:
             best = PoseEstimate(np.full((4, 4), np.nan), float("inf"), 0, 0, "lost",
