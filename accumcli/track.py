@@ -37,7 +37,8 @@ chessboard's grid did on sim_box from a pose that showed under 1 % of it); other
 (``judge``). ``PoseTracker`` adapts the RMS and inlier-share
 limits once, on the refinement of the first frame's given pose (``calibrated``). The tracker then
 compares the candidate poses of a frame (``decide``): a verified pose whose coverage exceeds that of
-a distinct verified alternative by less than ``min_margin`` is ``ambiguous`` and keeps the alternatives. Every estimate carries its
+a distinct rival (a verified pose, or one only the images failed that a search after a failure or a
+symmetry proposed) by less than ``min_margin`` is ``ambiguous`` and keeps the alternatives. Every estimate carries its
 figures and the standard deviations of its last Gauss-Newton step (``PoseEstimate.figures``).
 
 ``PoseTracker`` follows a sequence. It refines from both the constant-velocity
@@ -143,7 +144,7 @@ class PoseEstimate:
     distances (a point counts once per image where it found an edge); coverage: the share of
     the visible model's sample points within ``inlier_px`` of an edge in both images (the left and
     right projections of one 3D point, so with the disparity of the pose); status 'tracked',
-    'ambiguous' or 'lost'; how it was found ('refined', 'wide', 'restart', 'ransac'); reason: why it is not
+    'ambiguous' or 'lost'; how it was found ('refined', 'wide', 'restart', 'ransac', 'symmetry'); reason: why it is not
     'tracked' ('' when it is); margin: coverage minus that of the best distinct alternative pose
     (NaN until the tracker compares them); std_rotation_deg (3,), std_translation_mm (3,): standard
     deviations of the final Gauss-Newton step's increment (rotation about the visible model's
@@ -760,8 +761,8 @@ def slides(accepted: Segments, distinct_m: float, max_m: float = 0.04, step_m: f
     the middle one of a tie), if at least half; both ways. Why: a model made mostly of parallel edges (an extrusion whose end
     edges were not accumulated) is pinned along them by its few other segments only, and RANSAC over
     pairs of segments at 30 to 90 degrees cannot propose a slide. sim_201's model of the tracking
-    scoreboard has 91 % of its accepted segments along one axis and slides onto itself by 14 mm
-    (0.70 of them), the spacing of their pieces."""
+    scoreboard has 91 % of its accepted segments along one axis and slides onto itself by 13 mm,
+    about the spacing of their pieces."""
     n = len(accepted)
     if n < 4:
         return []
