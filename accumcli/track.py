@@ -758,9 +758,9 @@ def slides(accepted: Segments, distinct_m: float, max_m: float = 0.04, step_m: f
     segments: the direction shared (within ``axis_deg``) by the most ``accepted`` segments, if at
     least half; along it, of the shifts beyond ``distinct_m`` up to ``max_m`` (``step_m`` apart), the
     one that brings the most segments onto segments (``support_3d``, as for the RANSAC symmetries;
-    the middle one of a tie), if at least half; both ways. Why: a model made mostly of parallel edges (an extrusion whose end
-    edges were not accumulated) is pinned along them by its few other segments only, and RANSAC over
-    pairs of segments at 30 to 90 degrees cannot propose a slide. sim_201's model of the tracking
+    the middle one of a tie), if at least half; both ways. Why: a model made mostly of parallel
+    edges (an extrusion whose end edges were not accumulated) is pinned along them by its few other
+    segments only, and RANSAC over pairs of segments at 30 to 90 degrees cannot propose a slide. sim_201's model of the tracking
     scoreboard has 91 % of its accepted segments along one axis and slides onto itself by 13 mm,
     about the spacing of their pieces."""
     n = len(accepted)
@@ -810,8 +810,9 @@ class PoseTracker:
             # pairs of segments at 30 to 90 degrees cannot propose
             found += [invert(T) for T in found]
             known = [PoseEstimate(T, 0.0, 0, 0, "") for T in found]
-            self._symmetries = found + [S for S in slides(accepted, self.params.distinct_m)
-                                        if all(_distinct(PoseEstimate(S, 0.0, 0, 0, ""), k, self.params) for k in known)]
+            new = [S for S in slides(accepted, self.params.distinct_m)
+                   if all(_distinct(PoseEstimate(S, 0.0, 0, 0, ""), k, self.params) for k in known)]
+            self._symmetries = found + new
         return self._symmetries
 
     def predict(self, time_ns: int) -> list[np.ndarray]:
