@@ -375,6 +375,11 @@ def test_a_restart_must_beat_the_unverified_poses_too():
     near_turned = make_transform(Rotation.from_rotvec([0, np.radians(7.0), 0]).as_matrix(), [0.0, 0.0, 0.5])
     hidden = decide([restart, _estimate(turned, 0.45), _estimate(near_turned, 0.59, "lost")])
     assert hidden.status == "ambiguous" and hidden.margin == pytest.approx(0.01)
+    blind = _estimate(turned, 0.72, "lost")     # the images fail it too: 0.1 % of the model in view
+    blind.shown = 0.001
+    restart = _estimate(T_FRONT, 0.79)
+    restart.method = "restart"
+    assert decide([restart, blind]).status == "tracked"
 
 
 def test_a_model_of_another_object_is_lost(noisy_pair, model_of_exact):
