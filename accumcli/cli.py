@@ -26,7 +26,7 @@ from .cli_options import (
     workers_option,
 )
 from .errors import AccumError
-from .outputs import caused_by_interrupt
+from .outputs import caused_by_interrupt, raise_pending_interrupt
 
 log = logging.getLogger("accumcli")
 
@@ -45,6 +45,7 @@ class AccumGroup(click.Group):
         extra.pop("standalone_mode", None)
         try:
             code = super().main(args, prog_name, standalone_mode=False, **extra)
+            raise_pending_interrupt()   # one noted while the compiler ran, after the last check
         except click.exceptions.Exit as e:
             code = e.exit_code
         except click.UsageError as e:
@@ -111,10 +112,11 @@ def progress_callback(label: str):
     terminal and without -q. Returns (callback, finish)."""
     ctx = click.get_current_context()
     if ctx.find_root().meta.get("quiet") or not sys.stderr.isatty():
-        return (lambda done, total: None), (lambda: None)
+        return (lambda done, total: raise_pending_interrupt()), (lambda: None)
     state = {}
 
     def update(done: int, total: int | None) -> None:
+        raise_pending_interrupt()   # a signal noted while the compiler ran (outputs._raise_interrupt)
         if "bar" not in state and total:
             state["bar"] = click.progressbar(length=total, label=label, file=sys.stderr, show_pos=True,
                                              show_eta=True)

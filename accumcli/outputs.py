@@ -100,8 +100,40 @@ def signals_blocked():
             signal.raise_signal(sig)
 
 
+_pending: list[int] = []    # interrupts noted while the compiler ran, raised at the next check
+
+
 def _raise_interrupt(signum, frame):
+    """SIGINT's and SIGTERM's handler: KeyboardInterrupt, except while numba or llvmlite run Python
+    code (compiling a kernel, or loading one from the cache, on its first call). There it would be
+    raised inside a ctypes callback, which drops it ("Exception ignored on calling ctypes callback
+    function": the run went on and replaced the outputs, exit 0) or leaves LLVM broken (a
+    segmentation fault, exit -11: both seen in a fresh clone's CI, SIGTERM 1.5 s into
+    ``accum accumulate``). So it is noted there and raised at the next check
+    (``raise_pending_interrupt``: every progress report of the CLI, and before an ``OutputSet``
+    commits)."""
+    if _in_compiler(frame):
+        _pending.append(signum)
+        return
     raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+def _in_compiler(frame) -> bool:
+    """Whether ``frame`` or a frame that called it is numba's or llvmlite's Python code."""
+    while frame is not None:
+        path = frame.f_code.co_filename
+        if f"{os.sep}numba{os.sep}" in path or f"{os.sep}llvmlite{os.sep}" in path:
+            return True
+        frame = frame.f_back
+    return False
+
+
+def raise_pending_interrupt() -> None:
+    """Raise the KeyboardInterrupt of a signal that arrived while the compiler ran (if any)."""
+    if _pending:
+        signum = _pending[0]
+        _pending.clear()
+        raise KeyboardInterrupt(signal.Signals(signum).name)
 
 
 def caused_by_interrupt(error: BaseException) -> bool:
@@ -119,8 +151,12 @@ def caused_by_interrupt(error: BaseException) -> bool:
 
 def interrupt_on_sigterm() -> None:
     """Make SIGTERM raise KeyboardInterrupt like SIGINT does, so an OutputSet cleans up on
-    both (call once, from the main thread, e.g. at CLI start)."""
+    both, and neither raise it inside the compiler (``_raise_interrupt``; SIGINT only where it
+    has Python's default handler: an ignored one stays ignored). Call once, from the main thread,
+    e.g. at CLI start."""
     signal.signal(signal.SIGTERM, _raise_interrupt)
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        signal.signal(signal.SIGINT, _raise_interrupt)
 
 
 class _GuardedFile:
@@ -233,7 +269,9 @@ class OutputSet:
 
     def commit(self) -> None:
         """Flush, fsync and close every file handed out, then rename every temp onto its target
-        with SIGINT/SIGTERM held back. Called by ``__exit__`` when the block ends without error."""
+        with SIGINT/SIGTERM held back. Called by ``__exit__`` when the block ends without error; an
+        interrupt noted while the compiler ran (``raise_pending_interrupt``) is raised instead."""
+        raise_pending_interrupt()
         used = [o for o in self._outputs.values() if o.temp is not None]
         mask = _umask()
         for out in used:

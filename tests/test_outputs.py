@@ -209,6 +209,31 @@ def test_sigterm_becomes_keyboard_interrupt(tmp_path):
     assert names(tmp_path) == []
 
 
+def test_an_interrupt_inside_the_compiler_waits_for_the_next_check(tmp_path):
+    """A signal while numba or llvmlite run Python code is noted, not raised there (a ctypes callback
+    would drop it or leave LLVM broken); the next check raises it, and an OutputSet about to commit
+    abandons its outputs instead."""
+    from types import SimpleNamespace
+
+    from accumcli.outputs import _raise_interrupt, raise_pending_interrupt
+
+    def frame(path, caller=None):
+        return SimpleNamespace(f_code=SimpleNamespace(co_filename=path), f_back=caller)
+
+    compiling = frame("/venv/lib/python3.11/site-packages/llvmlite/binding/executionengine.py",
+                      frame("/work/accumcli/lines2d.py"))
+    _raise_interrupt(signal.SIGTERM, compiling)                     # noted, not raised
+    target = tmp_path / "m.json"
+    target.write_text("previous")
+    with pytest.raises(KeyboardInterrupt, match="SIGTERM"):
+        with OutputSet([target]) as out:
+            out.open(target).write("new")
+    assert target.read_text() == "previous" and names(tmp_path) == ["m.json"]
+    raise_pending_interrupt()                                        # raised once only
+    with pytest.raises(KeyboardInterrupt, match="SIGINT"):
+        _raise_interrupt(signal.SIGINT, frame("/work/accumcli/lines2d.py"))   # elsewhere: at once
+
+
 def test_recording_writer_is_atomic(tmp_path):
     target = tmp_path / "rec.mcap"
     with pytest.raises(RuntimeError):
