@@ -729,7 +729,12 @@ def _rank(estimate: PoseEstimate) -> tuple:
 
 def _distinct(a: PoseEstimate, b: PoseEstimate, params: TrackParams) -> bool:
     """Whether two estimates' poses are more than ``distinct_deg`` or ``distinct_m`` apart."""
-    rotation, translation = pose_error(a.T_camera_object, b.T_camera_object)
+    return _apart(a.T_camera_object, b.T_camera_object, params)
+
+
+def _apart(A: np.ndarray, B: np.ndarray, params: TrackParams) -> bool:
+    """Whether two transforms (4, 4) are more than ``distinct_deg`` or ``distinct_m`` apart."""
+    rotation, translation = pose_error(A, B)
     return rotation > params.distinct_deg or translation > params.distinct_m
 
 
@@ -747,8 +752,9 @@ def decide(candidates: list[PoseEstimate], params: TrackParams = TrackParams()) 
     restart 6.4 deg off verified at 0.60 (RMS 0.55 px) where refinements 11 to 13 deg from the
     truth covered 0.53 and 0.56, failed by RMS 0.63 and 0.67 px (limit 0.6) and inlier shares of
     0.87 and 0.88 (0.9). A rival the images fail clearly (a pose showing 0.1 % of the model,
-    'covering' 0.72 with an RMS of 0.83 px beside a right restart on dev_steps_track) is none. A verified best whose margin is under ``min_margin`` is 'ambiguous', the rivals within the
-    margin in its ``alternatives`` (a symmetric model, e.g. the chessboard's half turn)."""
+    'covering' 0.72 with an RMS of 0.83 px beside a right restart on dev_steps_track) is none. A
+    verified best whose margin is under ``min_margin`` is 'ambiguous', the rivals within the margin
+    in its ``alternatives`` (a symmetric model, e.g. the chessboard's half turn)."""
     finite = [c for c in candidates if np.isfinite(c.T_camera_object).all()]
     if not finite:
         return None
@@ -783,9 +789,9 @@ def slides(accepted: Segments, distinct_m: float, max_m: float = 0.04, step_m: f
     one that brings the most segments onto segments (``support_3d``, as for the RANSAC symmetries;
     the middle one of a tie), if at least half; both ways. Why: a model made mostly of parallel
     edges (an extrusion whose end edges were not accumulated) is pinned along them by its few other
-    segments only, and RANSAC over pairs of segments at 30 to 90 degrees cannot propose a slide. sim_201's model of the tracking
-    scoreboard has 91 % of its accepted segments along one axis and slides onto itself by 13 mm,
-    about the spacing of their pieces."""
+    segments only, and RANSAC over pairs of segments at 30 to 90 degrees cannot propose a slide.
+    sim_201's model of the tracking scoreboard has 91 % of its accepted segments along one axis and
+    slides onto itself by 13 mm, about the spacing of their pieces."""
     n = len(accepted)
     if n < 4:
         return []
@@ -796,7 +802,8 @@ def slides(accepted: Segments, distinct_m: float, max_m: float = 0.04, step_m: f
         return []
     axis = np.linalg.svd(d[members], full_matrices=False)[2][0]     # their mean undirected direction
     shifts = np.arange(distinct_m + step_m, max_m + 1e-9, step_m)
-    onto = np.array([support_3d(accepted, accepted, make_transform(np.eye(3), t * axis)) for t in shifts])
+    tree = cKDTree(accepted.centers)          # the model onto itself: one tree for every shift
+    onto = np.array([support_3d(accepted, accepted, make_transform(np.eye(3), t * axis), tree) for t in shifts])
     if onto.max() < 0.5 * n:
         return []
     tied = shifts[onto == onto.max()]           # within support_3d's reach of the best: their middle
@@ -826,16 +833,12 @@ class PoseTracker:
         if self._symmetries is None:
             accepted = self._accepted
             found = ransac_pose(self.model, accepted, keep=2 * self.params.ransac_hypotheses + 1) if len(accepted) else None
-            identity = PoseEstimate(np.eye(4), 0.0, 0, 0, "")
             found = [T for T, support in (found.hypotheses if found else [])
-                     if support >= 0.5 * len(accepted) and _distinct(PoseEstimate(T, 0.0, 0, 0, ""), identity, self.params)]
-            # a shift by one square and back; and slides along parallel segments, which RANSAC over
-            # pairs of segments at 30 to 90 degrees cannot propose
-            found += [invert(T) for T in found]
-            known = [PoseEstimate(T, 0.0, 0, 0, "") for T in found]
-            new = [S for S in slides(accepted, self.params.distinct_m)
-                   if all(_distinct(PoseEstimate(S, 0.0, 0, 0, ""), k, self.params) for k in known)]
-            self._symmetries = found + new
+                     if support >= 0.5 * len(accepted) and _apart(T, np.eye(4), self.params)]
+            found += [invert(T) for T in found]        # a shift by one square and back
+            # slides along parallel segments, which RANSAC over pairs at 30 to 90 degrees cannot propose
+            self._symmetries = found + [S for S in slides(accepted, self.params.distinct_m)
+                                        if all(_apart(S, T, self.params) for T in found)]
         return self._symmetries
 
     def predict(self, time_ns: int) -> list[np.ndarray]:
