@@ -382,6 +382,47 @@ def test_a_restart_must_beat_the_unverified_poses_too():
     assert decide([restart, blind]).status == "tracked"
 
 
+def test_at_equal_coverage_the_closer_fit_wins_over_more_inliers():
+    """dev_steps_track with the view-plane model: a minimum 2.5 deg off covered 0.80 with 401 of 420
+    inliers at 0.59 px, the truth 0.81 with 380 of 388 at 0.37 px. The truth wins, and the minimum,
+    within ``distinct_deg`` of it, is no rival."""
+    from accumcli.track import PoseEstimate, decide
+
+    off = make_transform(Rotation.from_rotvec([0, np.radians(2.5), 0]).as_matrix(), [0.001, 0.0, 0.5])
+    minimum = PoseEstimate(off, 0.59, 401, 420, "tracked", coverage=0.80)
+    truth = PoseEstimate(T_FRONT, 0.37, 380, 388, "tracked", coverage=0.806)
+    for order in ([minimum, truth], [truth, minimum]):
+        best = decide(order)
+        assert best is truth and best.status == "tracked"
+    far_better_cover = PoseEstimate(off, 0.59, 401, 420, "tracked", coverage=0.86)   # coverage still comes first
+    assert decide([truth, far_better_cover]) is far_better_cover
+
+
+def test_a_verified_fit_much_worse_than_the_recent_frames_restarts(noisy_pair, model_of_exact, monkeypatch):
+    """The restarts run on a verified frame only when its RMS exceeds ``suspect_rms_ratio`` times the
+    median of the recent tracked frames'."""
+    exact, _ = noisy_pair
+    calls = []
+    original = PoseTracker._restarts
+
+    def counted(self, judged, frame, grads):
+        calls.append(frame.index)
+        return original(self, judged, frame, grads)
+
+    monkeypatch.setattr(PoseTracker, "_restarts", counted)
+    tracker = PoseTracker(model_of_exact)
+    with Recording(exact) as rec:
+        frames = list(rec.frames(0, 6))
+    rms = [tracker.update(f, f.T_camera_object if f.index == 0 else None).residual_px for f in frames[:4]]
+    assert calls == [] and len(tracker._recent_rms) == 4
+    tracker._recent_rms.extend([np.median(rms) / 2] * 3)      # recent frames that fit twice as well
+    assert tracker.update(frames[4]).status == "tracked"
+    assert calls == [4]
+    tracker._recent_rms.extend([np.median(rms)] * 5)          # as well as this one: no restart
+    assert tracker.update(frames[5]).status == "tracked"
+    assert calls == [4]
+
+
 def test_a_model_of_another_object_is_lost(noisy_pair, model_of_exact):
     """The model scaled by 1.4 about its centre (another box of the same shape) from the true first pose:
     the images do not verify it; every frame 'lost'."""
