@@ -296,12 +296,10 @@ def extract(recording, output, rrd, with_2d, workers, frames, extract_params, op
 @click.option("--so", "angle_threshold", type=click.FloatRange(0.5, 45.0), default=7.0, show_default=True,
               metavar="DEG",
               help="s_o of the paper's metric, degrees.")
-@click.option("--view-planes", is_flag=True,
+@click.option("--view-planes/--average-directions", default=True, show_default=True,
               help="A segment's direction from the planes through the camera and the segment in all the "
-                   "frames that saw it (the object's turn as a wide baseline) instead of the average of "
-                   "its stereo directions: more precise models (make suite: precision median 0.945 -> "
-                   "0.953) where the poses are good to half a degree; not the default yet, as tracking with "
-                   "such models has not been shown to hold.")
+                   "frames that saw it (the object's turn as a wide baseline), or the average of its "
+                   "stereo directions (the paper's; the planes trust the poses to about half a degree).")
 @frame_workers_option
 @frames_option
 @extraction_options

@@ -12,14 +12,9 @@ Entities are ``Segments`` in the object frame with running sums in ``extra``:
   first observation, only keeps the system solvable). Across the line the
   merge is thus a weighted average that trusts each view where it is precise,
   each view weighted by its match confidence;
-- ``dir_sum`` (N, 3): the sum of the sign-aligned directions, each weighted by
-  its confidence and the inverse variance of its direction (a segment fitted
-  along a long stretch is sure of its direction, one alone is not);
-  ``weight`` (N,): the sum of confidences;
-- with ``view_planes`` (``accum accumulate --view-planes``; off by default, see
-  below), ``dir_info`` (N, 3, 3) instead sets the direction, in information
-  form: the direction is the unit vector it weighs least (its smallest
-  eigenvector). Each observation adds, weighted by its confidence,
+- ``dir_info`` (N, 3, 3) sets the direction (``view_planes``, the default), in
+  information form: the direction is the unit vector it weighs least (its
+  smallest eigenvector). Each observation adds, weighted by its confidence,
   ``(I - u u^T) / sigma_u^2`` (towards its own direction u, as sure as the
   stereo fit made it) and ``n n^T / sigma_n^2``, which keeps the direction in
   the plane through the camera and the segment (normal n = ray x u). That
@@ -30,15 +25,16 @@ Entities are ``Segments`` in the object frame with running sums in ``extra``:
   pixels) and the pose's rotation (``pose_rotation_sigma_deg``). One view
   gives back its own u; two views of a turning object give two distinct
   planes whose intersection is the direction, as sure as a wide-baseline
-  triangulation (averaging keeps the errors, which lie along each view's
-  ray). Measured with ``make suite`` (19 rows): accumulated precision median
-  0.945 -> 0.955 (higher on 14 rows, lower on one by 0.005), completeness
-  median 0.568 both; but the tracking scoreboard, whose zero false frames are
-  known to move with any change of the models, then has one (dev_steps_track,
-  3.7 deg; with the 12-degree critical angle of before, two), so it is not
-  the default until tracking holds with it. It trusts the poses to
-  ``pose_rotation_sigma_deg``: with ``--motion tracked`` on poses wrong by
-  1.5 deg / 4 mm (``make motion``) the worst shortfall grew from 0.055 to 0.113;
+  triangulation. Why: near the critical plane a 2D line's angle error of 1
+  degree (crowded edges bias it) tilts the stereo direction by 20 degrees
+  along the viewing ray, and averaging keeps such errors;
+- ``dir_sum`` (N, 3): the sum of the sign-aligned directions, each weighted
+  by its confidence and the inverse variance of its direction, which sets the
+  direction instead with ``accum accumulate --average-directions``. The
+  planes trust the poses to ``pose_rotation_sigma_deg``: ``--motion tracked``
+  builds its intermediate models by averaging
+  (``runs.accumulation.tracked_poses``); ``weight`` (N,): the sum of
+  confidences;
 - along the line, the segment covers the union of its extent and the merged
   observation's, its centre re-placed at the middle of that union: an
   observation of the same length shifted by 4 mm along the line moves the
@@ -104,7 +100,7 @@ class LineModelParams:
     view_step_deg: float = 10.0       # a new viewing direction is kept if this far from the stored ones
     max_extent: float = 2.0           # a model segment covers at most this many observation lengths
     reference_direction_sigma_deg: float = 2.0  # a direction this certain weighs as much as its confidence
-    view_planes: bool = False         # directions from the planes of all views (``dir_info``; module docstring)
+    view_planes: bool = True          # directions from the planes of all views (``dir_info``; module docstring)
     line_sigma_px: float = 0.15       # scatter of a 2D line's edge points across it (dir_info's planes)
     pose_rotation_sigma_deg: float = 0.5  # rotation error of a pose, between the views whose planes meet
     min_plane_sine: float = 0.2       # a segment this near its viewing ray (sin) spans no plane worth using

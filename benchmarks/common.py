@@ -27,8 +27,8 @@ def recording(name: str, **options) -> str:
     return str(path)
 
 
-def accumulate_params(view_planes: bool = False):
-    """The accumulation parameters of the scoreboards: the defaults, or ``accum accumulate --view-planes``."""
+def accumulate_params(view_planes: bool = True):
+    """The accumulation parameters of the scoreboards: the defaults, or ``accum accumulate --average-directions``."""
     from accumcli.line_model import LineModelParams
     from accumcli.pipeline import AccumulateParams
 

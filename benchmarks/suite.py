@@ -80,9 +80,9 @@ def real_and_independent_rows() -> list[Row]:
     return rows
 
 
-def score(row: Row, view_planes: bool = False) -> dict:
-    """Extract (with 2D segments), evaluate the frames; accumulate (``view_planes``: with
-    ``accum accumulate --view-planes``), evaluate the model."""
+def score(row: Row, view_planes: bool = True) -> dict:
+    """Extract (with 2D segments), evaluate the frames; accumulate (``view_planes`` False: with
+    ``accum accumulate --average-directions``), evaluate the model."""
     from accumcli.runs import (
         RecordingOptions,
         accumulate_recording,
@@ -91,7 +91,7 @@ def score(row: Row, view_planes: bool = False) -> dict:
     )
 
     options = RecordingOptions(object_frame=row.object_frame)
-    out = CACHE / ("suite_view_planes" if view_planes else "suite")   # the variant's files apart (make uncertainty)
+    out = CACHE / ("suite" if view_planes else "suite_average_directions")   # the variant's files apart (make uncertainty)
     out.mkdir(parents=True, exist_ok=True)
     frames_file, model_file = out / f"{row.name}.frames.jsonl", out / f"{row.name}.model.json"
     extract_recording(row.path, str(frames_file), options=options, with_2d=True)
@@ -142,18 +142,18 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--only", help="run only the rows whose name contains this")
     parser.add_argument("--no-save", action="store_true", help="do not write docs/suite.md")
-    parser.add_argument("--view-planes", action="store_true",
-                        help="accumulate with --view-planes (a variant: docs/suite.md is not written)")
+    parser.add_argument("--average-directions", action="store_true",
+                        help="accumulate with --average-directions (a variant: docs/suite.md is not written)")
     args = parser.parse_args(argv)
     rows = simulated_rows() + real_and_independent_rows()
     if args.only:
         rows = [r for r in rows if args.only in r.name]
     t0 = time.perf_counter()
-    results = score_rows(rows, functools.partial(score, view_planes=args.view_planes))
+    results = score_rows(rows, functools.partial(score, view_planes=not args.average_directions))
     lines = table(results, rows)
     print("\n".join(lines))
     print(f"\n{len(rows)} recordings in {time.perf_counter() - t0:.0f} s")
-    if not args.no_save and not args.only and not args.view_planes:
+    if not args.no_save and not args.only and not args.average_directions:
         doc = ROOT / "docs" / "suite.md"
         doc.write_text("# The scoreboard (`make suite`)\n\n" + __doc__.split("\n\n")[1].replace("\n", " ")
                        + f"\n\nLast run: {time.strftime('%Y-%m-%d')}, {os.cpu_count()} cores.\n\n"

@@ -79,7 +79,7 @@ def rows() -> list[Row]:
     return out
 
 
-def score(row: Row, view_planes: bool = False) -> dict:
+def score(row: Row, view_planes: bool = True) -> dict:
     from accumcli.geometry import pose_error
     from accumcli.model_io import read_truth
     from accumcli.runs import FrameRange, RecordingOptions, accumulate_recording, track_recording
@@ -148,16 +148,16 @@ def table(results: dict, chosen: list[Row]) -> list[str]:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--only", help="run only the rows whose name contains this")
-    parser.add_argument("--view-planes", action="store_true",
-                        help="models accumulated with --view-planes (a variant: docs/suite.md is not written)")
+    parser.add_argument("--average-directions", action="store_true",
+                        help="models accumulated with --average-directions (a variant: docs/suite.md is not written)")
     args = parser.parse_args(argv)
     chosen = [r for r in rows() if not args.only or args.only in r.name]
     t0 = time.perf_counter()
-    results = score_rows(chosen, functools.partial(score, view_planes=args.view_planes))
+    results = score_rows(chosen, functools.partial(score, view_planes=not args.average_directions))
     lines = table(results, chosen)
     print("\n".join(lines))
     print(f"\n{len(chosen)} rows in {time.perf_counter() - t0:.0f} s")
-    if not args.only and not args.view_planes:
+    if not args.only and not args.average_directions:
         save(lines)
     return 0
 

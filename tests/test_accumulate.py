@@ -149,9 +149,9 @@ def _copy(observed: Segments) -> Segments:
 def test_two_views_planes_pin_the_direction_that_stereo_tilts():
     """A segment along y seen from two views 40 degrees apart about it, each triangulated 15 degrees
     tilted towards its camera (stereo's weak direction, within the plane through the camera and the
-    line): with ``view_planes`` the two planes meet near the true direction; averaging (the default)
+    line): with ``view_planes`` (the default) the two planes meet near the true direction; averaging
     keeps the tilt."""
-    kind = LineSegmentType(LineModelParams(view_planes=True))
+    kind = LineSegmentType()
     views = []
     for turn_deg in (0.0, 40.0):
         T = make_transform(Rotation.from_rotvec([0, np.radians(turn_deg), 0]).as_matrix(), [0.0, 0.0, 0.5])
@@ -166,9 +166,9 @@ def test_two_views_planes_pin_the_direction_that_stereo_tilts():
     first, _ = views[0]
     # one view alone keeps its own (tilted) direction
     assert abs(np.degrees(np.arccos(abs(first.directions[0, 1]))) - 15.0) < 1e-6
-    default = LineSegmentType()
-    averaged = default.merge(default.observe(_copy(first), FrameContext(views[0][1], INTR)),
-                             default.observe(_copy(views[1][0]), FrameContext(views[1][1], INTR)),
+    average = LineSegmentType(LineModelParams(view_planes=False))
+    averaged = average.merge(average.observe(_copy(first), FrameContext(views[0][1], INTR)),
+                             average.observe(_copy(views[1][0]), FrameContext(views[1][1], INTR)),
                              np.array([0]), np.array([0]), FrameContext(views[1][1], INTR))
     assert np.degrees(np.arccos(abs(averaged.directions[0, 1]))) > 10.0    # 14
     merged = kind.merge(first, views[1][0], np.array([0]), np.array([0]), FrameContext(views[1][1], INTR))
