@@ -906,8 +906,8 @@ class PoseTracker:
     def _suspect(self, candidates: list[PoseEstimate]) -> bool:
         """Whether the best of ``candidates``, though verified, has an RMS over ``suspect_rms_ratio``
         times the median of the last ``recent_frames`` tracked frames' (at least 3): a refinement
-        that stopped in a wrong minimum fits worse than the frames before it. On dev_steps_track (model
-        with the view-plane model) such minima 2.5 and 3.7 deg off verified at 0.59 and 0.58 px (limit 0.6)
+        that stopped in a wrong minimum fits worse than the frames before it. On dev_steps_track (with
+        the view-plane model) such minima 2.5 and 3.7 deg off verified at 0.59 and 0.58 px (limit 0.6)
         after frames at a median 0.34 px; restarted, the first found the truth at 0.37 px."""
         p = self.params
         best = max(candidates, key=_rank, default=None)
@@ -991,8 +991,9 @@ class PoseTracker:
             strict = replace(p, max_std_deg=p.max_std_deg * p.reacquire_std_ratio,
                              max_std_mm=p.max_std_mm * p.reacquire_std_ratio)
             for c in candidates:    # no motion corroborates a re-acquired pose: it must be pinned tighter
-                if c.method in ("ransac", "symmetry") and c.status == "tracked" and _determination_failures(c, strict):
-                    c.status, c.reason = "lost", "re-acquired: " + _determination_failures(c, strict)[0]
+                loose = c.method in ("ransac", "symmetry") and c.status == "tracked" and _determination_failures(c, strict)
+                if loose:
+                    c.status, c.reason = "lost", "re-acquired: " + loose[0]
             accepted = self._accepted
             tree = cKDTree(observed.centers) if len(observed) else None
             for c in candidates:    # every pose: one the images failed may still be a rival (decide)
