@@ -177,14 +177,14 @@ def test_two_views_planes_pin_the_direction_that_stereo_tilts():
 
 
 def test_merge_trims_the_union_to_max_extent_at_both_ends():
-    kind = LineSegmentType()                    # max_extent 2: at most 24 mm for 12 mm observations
+    kind = LineSegmentType()                    # max_extent 3: at most 36 mm for 12 mm observations
     T = make_transform(np.eye(3), [0.0, 0.0, 0.5])
     model = kind.observe(_one_segment(), FrameContext(T, INTR))
     observed = _one_segment()
-    observed.centers = np.array([[0.0, 0.020, 0.0]])        # union [-6, 26] mm: 32 mm, trimmed by 4 at each end
+    observed.centers = np.array([[0.0, 0.030, 0.0]])        # union [-6, 36] mm: 42 mm, trimmed by 3 at each end
     observed = kind.observe(observed, FrameContext(T, INTR))
     merged = kind.merge(model, observed, np.array([0]), np.array([0]), FrameContext(T, INTR))
-    assert abs(merged.centers[0, 1] - 0.010) < 1e-9 and abs(merged.lengths[0] - 0.024) < 1e-9
+    assert abs(merged.centers[0, 1] - 0.015) < 1e-9 and abs(merged.lengths[0] - 0.036) < 1e-9
 
 
 def _turning(k: int) -> np.ndarray:
