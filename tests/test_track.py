@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import re
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -400,14 +401,15 @@ def test_at_equal_coverage_the_closer_fit_wins_over_more_inliers():
 
 def test_a_verified_fit_much_worse_than_the_recent_frames_restarts(noisy_pair, model_of_exact, monkeypatch):
     """The restarts run on a verified frame only when its RMS exceeds ``suspect_rms_ratio`` times the
-    median of the recent tracked frames' (here never in the first four frames, which fit alike)."""
+    median of the recent tracked frames' (here never in the first four frames, which fit alike) and
+    ``suspect_limit_share`` of the RMS limit."""
     exact, _ = noisy_pair
     calls = []
     original = PoseTracker._restarts
 
-    def counted(self, judged, frame, grads):
+    def counted(self, judged, frame, grads, **levels):
         calls.append(frame.index)
-        return original(self, judged, frame, grads)
+        return original(self, judged, frame, grads, **levels)
 
     monkeypatch.setattr(PoseTracker, "_restarts", counted)
     tracker = PoseTracker(model_of_exact)
@@ -415,7 +417,11 @@ def test_a_verified_fit_much_worse_than_the_recent_frames_restarts(noisy_pair, m
         frames = list(rec.frames(0, 6))
     rms = [tracker.update(f, f.T_camera_object if f.index == 0 else None).residual_px for f in frames[:4]]
     assert calls == [] and len(tracker._recent_rms) == 4
-    tracker._recent_rms.extend([np.median(rms) / 2] * 3)      # recent frames that fit twice as well
+    tracker._recent_rms.extend([np.median(rms) / 2] * 3)      # recent frames that fit twice as well ...
+    assert max(rms) < tracker.params.suspect_limit_share * tracker.params.max_rms_px
+    assert tracker.update(frames[4]).status == "tracked"
+    assert calls == []                                        # ... but far under the limit: no restart
+    tracker.params = replace(tracker.params, suspect_limit_share=0.0)
     assert tracker.update(frames[4]).status == "tracked"
     assert calls == [4]
     tracker._recent_rms.extend([np.median(rms)] * 5)          # as well as this one: no restart
