@@ -808,8 +808,11 @@ def slides(accepted: Segments, distinct_m: float, max_m: float = 0.04, step_m: f
     if n < 4:
         return []
     d = accepted.directions
-    parallel = np.abs(d @ d.T) >= np.cos(np.radians(axis_deg))
-    members = parallel[np.argmax(parallel.sum(axis=1))]
+    # per segment, how many lie within axis_deg of its line (either sign): a KD-tree on the unit
+    # directions and their opposites, not the (N, N) matrix of every pair's cosine
+    chord = 2 * np.sin(np.radians(axis_deg) / 2)
+    count = cKDTree(np.vstack([d, -d])).query_ball_point(d, chord, return_length=True)
+    members = np.abs(d @ d[np.argmax(count)]) >= np.cos(np.radians(axis_deg))
     if members.sum() < 0.5 * n:
         return []
     axis = np.linalg.svd(d[members], full_matrices=False)[2][0]     # their mean undirected direction
@@ -899,9 +902,9 @@ class PoseTracker:
         if not p.restart_deg:
             return []
         found = []
+        search, tukey = (p.search_px[-levels:], p.tukey_px[-levels:]) if levels else (None, None)
         for T in _perturbed(max(judged, key=_rank).T_camera_object, np.radians(p.restart_deg)):
-            restarted = _refine(self._accepted, frame, T, p, grads, p.search_px[-levels:] if levels else None,
-                                p.tukey_px[-levels:] if levels else None)
+            restarted = _refine(self._accepted, frame, T, p, grads, search, tukey)
             restarted.method = "restart"
             if all(_image_gap(self._accepted, restarted.T_camera_object, c.T_camera_object, frame.intrinsics)
                    > p.merge_px for c in judged):
