@@ -91,6 +91,7 @@ from scipy.spatial.transform import Rotation
 from .geometry import (check_points, check_transform, extrapolate, invert, make_transform, orthonormalized, pose_error,
                        quat_from_transform, rotate_vectors, rotation_about_point, transform_points)
 from .edge_search import edge_candidates
+from .pose_kernel import normal_equations
 from .lines2d import Gradients, LineParams, frame_gradients
 from .recording import StereoFrame, StereoIntrinsics
 from .segments import Segments
@@ -433,23 +434,17 @@ def _gauss_newton(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, gra
     measurements = _measure(transform_points(T, points_obj), rotate_vectors(T, dirs_obj), intr, grads, search, params)
     if prior is not None:       # the prior's inverse variances per axis (rad^-2, m^-2)
         inverse = 1 / np.repeat([np.radians(params.prior_deg), params.prior_mm / 1000], 3) ** 2
+    uv0, normal, candidates = (np.ascontiguousarray(np.stack(m)) for m in zip(*measurements))
     for _ in range(params.iterations_per_level):
         P = transform_points(T, points_obj)
         pivot = P.mean(axis=0)  # rotating about the object, not the camera, decouples the increments
-        J_all, r_all, e_all = [], [], []
-        for side, (r, found, normal) in enumerate(_residuals(P, measurements, intr)):
-            J_all.append(_jacobian(P, normal, intr, side, pivot)[found])
-            r_all.append(r[found])
-            e_all.append(expected[found])
-        J, r = np.vstack(J_all), np.concatenate(r_all)
-        if len(r) < 6:
+        # expected: a segment beyond its cone of views pulls less (expected_weights)
+        H, g, found, swr2, sw = normal_equations(P, pivot, uv0, normal, candidates, expected, intr.fx, intr.fy,
+                                                 intr.cx, intr.cy, intr.baseline, float(tukey))
+        if found < 6:
             return None
-        w = np.where(np.abs(r) < tukey, (1 - (r / tukey) ** 2) ** 2, 0.0)
-        w *= np.concatenate(e_all)          # a segment beyond its cone of views pulls less (expected_weights)
-        H = (J * w[:, None]).T @ J + 1e-6 * np.eye(6)
-        g = (J * w[:, None]).T @ r
         if prior is not None:
-            sigma2 = max(float(np.sum(w * r ** 2) / max(w.sum(), 1e-9)), 0.01)
+            sigma2 = max(swr2 / max(sw, 1e-9), 0.01)
             D = T @ invert(prior)                   # the pose's departure from the prior, camera frame
             departure = np.concatenate([Rotation.from_matrix(D[:3, :3]).as_rotvec(), D[:3, :3] @ pivot + D[:3, 3] - pivot])
             H += sigma2 * np.diag(inverse)

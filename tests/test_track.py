@@ -720,6 +720,38 @@ def test_edge_search_finds_nothing_far_outside_the_image_or_at_nan():
     assert np.isnan(edge_candidates(Gradients.of(image).gxy, uv, normal, 40, 3.0, 0.85, 3)).all()
 
 
+def test_compiled_normal_equations_sum_what_verification_measures():
+    """The Gauss-Newton kernel and verification's numpy residuals and Jacobians (``_residuals``,
+    ``_jacobian``) are two writings of one model: the nearest candidate (NaN where none), Tukey
+    weights times the expected weights, the pivot's rotation and the right camera's baseline."""
+    from accumcli.pose_kernel import normal_equations
+    from accumcli.recording.calibration import StereoIntrinsics
+    from accumcli.track import _jacobian, _residuals
+
+    rng = np.random.default_rng(1)
+    intr = StereoIntrinsics(fx=600.0, fy=610.0, cx=320.0, cy=240.0, baseline=0.08, width=640, height=480)
+    measured_at = rng.normal([0, 0, 0.6], [0.05, 0.05, 0.03], (300, 3))
+    uv0 = np.stack(intr.project(measured_at)[:2])
+    normal = rng.normal(size=(2, 300, 2))
+    normal /= np.linalg.norm(normal, axis=2, keepdims=True)
+    candidates = rng.normal(0, 3, (2, 300, 3))
+    candidates[rng.random((2, 300, 3)) < 0.4] = np.nan
+    candidates[:, :20] = np.nan               # some samples found no edge at all
+    expected = rng.random(300)
+    P = measured_at + rng.normal(0, 0.001, (300, 3))
+    pivot = P.mean(axis=0)
+    H, g, found, _, _ = normal_equations(P, pivot, uv0, normal, candidates, expected, intr.fx, intr.fy,
+                                         intr.cx, intr.cy, intr.baseline, 4.0)
+    rows = [(_jacobian(P, n, intr, side, pivot)[f], r[f], expected[f])
+            for side, (r, f, n) in enumerate(_residuals(P, list(zip(uv0, normal, candidates)), intr))]
+    J, r, e = (np.concatenate(x) for x in zip(*rows))
+    w = np.where(np.abs(r) < 4.0, (1 - (r / 4.0) ** 2) ** 2, 0.0) * e
+    assert found == len(r) == 2 * 300 - 2 * 20 - np.isnan(candidates[:, 20:]).all(axis=2).sum()
+    H_numpy, g_numpy = (J * w[:, None]).T @ J + 1e-6 * np.eye(6), (J * w[:, None]).T @ r
+    np.testing.assert_allclose(H, H_numpy, rtol=0, atol=1e-10 * np.abs(H_numpy).max())
+    np.testing.assert_allclose(g, g_numpy, rtol=0, atol=1e-10 * np.abs(g_numpy).max())
+
+
 def test_kernels_compile_without_a_cache_when_there_is_nowhere_to_write_it(monkeypatch):
     import accumcli.jit as jit
 
