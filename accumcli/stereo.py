@@ -45,7 +45,13 @@ baseline one pixel of disparity is 5 mm of depth, so a 15 px segment's own
 endpoints tilt it by degrees. A segment alone on its stretch keeps its own
 disparity and takes its direction from the intersection of the two planes
 back-projected through its left and right Hough lines (their whole fits, not
-the short pieces). Each segment carries the standard deviations of its
+the short pieces); its ends are where the rays through its left piece's ends
+pass nearest that 3D line (``_ends_on_rays``), so a piece receding in depth is
+as long as the image shows it, not cut at one depth. On ``make suite`` against
+the ends at one depth: the single-frame correct 3D higher on every row (median
+0.379 -> 0.393), accumulated completeness median 0.579 -> 0.585 and worst row
+0.232 -> 0.257, precision median 0.955 -> 0.950 (dev_wedge_far 0.955 -> 0.925,
+dev_cube_small 0.860 -> 0.891). Each segment carries the standard deviations of its
 depth (``sigma_depth_m``, from the fit's residuals) and of its direction
 (``sigma_direction_rad``: the fitted slope's uncertainty over the segment's
 length, or ``single_direction_sigma_deg`` for a segment alone).
@@ -300,6 +306,9 @@ def triangulate(left: Segments2D, right: Segments2D, m: Matches, intr: StereoInt
             np.linalg.norm(direction[alone], axis=1, keepdims=True)
     length = np.linalg.norm(p_plus - p_minus, axis=1)
     direction = direction / np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-12)
+    if alone.any():   # the left piece's ends lie on their rays: a tilted piece is longer than at one depth
+        p_center[alone], length[alone] = _ends_on_rays(p_center[alone], direction[alone], centers[alone] - half[alone],
+                                                       centers[alone] + half[alone], length[alone], intr)
     # depth uncertainty: fit residual (or a default) through the disparity's sensitivity
     sigma_d = np.where(fitted, np.maximum(sigma[stretch], 0.05) * np.sqrt(
         1.0 / np.maximum(count[stretch], 1) + (s - mean_s[stretch]) ** 2
@@ -317,6 +326,27 @@ def triangulate(left: Segments2D, right: Segments2D, m: Matches, intr: StereoInt
                         {"sigma_depth_m": sigma_depth, "sigma_direction_rad": sigma_direction,
                          "disparity_px": d_center, "u": centers[:, 0], "v": centers[:, 1]})
     return segments.select(idx), idx
+
+
+def _ends_on_rays(center, direction, uv_minus, uv_plus, length, intr: StereoIntrinsics, min_sine: float = 0.2,
+                  max_stretch: float = 3.0):
+    """(centre (K, 3), length (K,)) of 3D lines through ``center`` along ``direction`` (left camera
+    frame) cut where they pass nearest the rays of the left image points ``uv_minus`` and
+    ``uv_plus`` (K, 2) px; the given centre and ``length`` where a line runs within asin(``min_sine``)
+    of a ray or the cut would stretch it more than ``max_stretch`` times (there the cut is ill-posed).
+    On ``make suite``, a limit of 0.5 or a stretch of 1.5 kept less: completeness median 0.580."""
+    def parameter(uv):
+        q = np.column_stack([(uv[:, 0] - intr.cx) / intr.fx, (uv[:, 1] - intr.cy) / intr.fy, np.ones(len(uv))])
+        q /= np.linalg.norm(q, axis=1, keepdims=True)
+        uq, pu, pq = np.sum(direction * q, axis=1), np.sum(center * direction, axis=1), np.sum(center * q, axis=1)
+        sine2 = 1 - uq ** 2
+        return (pq * uq - pu) / np.maximum(sine2, 1e-12), sine2
+    t_minus, s_minus = parameter(uv_minus)
+    t_plus, s_plus = parameter(uv_plus)
+    new_length = np.abs(t_plus - t_minus)
+    ok = (np.minimum(s_minus, s_plus) >= min_sine ** 2) & (new_length <= max_stretch * length) & (new_length > 0)
+    new_center = center + ((t_plus + t_minus) / 2)[:, None] * direction
+    return np.where(ok[:, None], new_center, center), np.where(ok, new_length, length)
 
 
 def _fit_lines(group, n, s, d, w):
