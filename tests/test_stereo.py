@@ -136,6 +136,22 @@ def test_a_receding_edge_alone_on_its_line_ends_where_its_left_pieces_end():
     assert off.max() < 0.0015 and along.min() > -0.002 and along.max() < np.linalg.norm(corners[3] - corners[0]) + 0.002
 
 
+def test_a_right_camera_with_another_gain_and_offset_matches_as_well():
+    """Real stereo cameras differ in gain and offset (the teabox's right camera: 0.72 times the
+    contrast, 52 grey levels up); matching takes the right patches to the left's grey levels."""
+    from dataclasses import replace
+
+    rect = quad([[-0.04, -0.06, 0.5], [0.05, -0.06, 0.5], [0.05, 0.06, 0.5], [-0.04, 0.06, 0.5]])
+    frame = render_pair([rect], seed=1)
+    brighter = np.clip(0.7 * frame.right.astype(float) + 60, 0, 255).astype(np.uint8)
+    same, other = (extract_frame(f, ExtractParams()).segments for f in (frame, replace(frame, right=brighter)))
+    assert len(same) >= 8
+    assert len(other) >= 0.9 * len(same)
+    for seg in (same, other):       # the rectangle's sides at x = -0.04 and 0.05, 0.5 m away
+        side = np.minimum(np.abs(seg.centers[:, 0] + 0.04), np.abs(seg.centers[:, 0] - 0.05))
+        assert np.all(np.hypot(side, seg.centers[:, 2] - 0.5)[np.abs(seg.directions[:, 1]) > 0.9] < 0.001)
+
+
 def test_extraction_returns_its_gradients_and_reuses_given_ones():
     from accumcli.lines2d import frame_gradients
 

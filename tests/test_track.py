@@ -752,6 +752,25 @@ def test_compiled_normal_equations_sum_what_verification_measures():
     np.testing.assert_allclose(g, g_numpy, rtol=0, atol=1e-10 * np.abs(g_numpy).max())
 
 
+def test_clustered_variance_grows_only_where_a_segment_s_samples_err_together():
+    """Independent residuals: the clustered variance is about the classical one. The same residual
+    spread, but shared by the samples of each segment (a misplaced model segment): about the
+    samples-per-segment times larger, which the classical figure cannot see."""
+    from accumcli.track import _clustered_variance
+
+    rng = np.random.default_rng(3)
+    segments, per_segment = 60, 8
+    cluster = np.repeat(np.arange(segments), per_segment)
+    J = rng.normal(size=(segments, 6))[cluster] + 0.1 * rng.normal(size=(segments * per_segment, 6))  # alike along a segment
+    H_inv = np.linalg.inv(J.T @ J)
+    classical = np.diag(H_inv) * 0.2 ** 2
+    independent = _clustered_variance(H_inv, J, rng.normal(0, 0.2, len(J)), cluster)
+    shared = _clustered_variance(H_inv, J, np.repeat(rng.normal(0, 0.2, segments), per_segment), cluster)
+    assert np.all(independent / classical > 0.5) and np.all(independent / classical < 2.0)
+    assert np.median(shared / classical) > 0.5 * per_segment
+    assert not _clustered_variance(H_inv, J[:48], np.ones(48), cluster[:48]).any()   # 6 clusters: none
+
+
 def test_kernels_compile_without_a_cache_when_there_is_nowhere_to_write_it(monkeypatch):
     import accumcli.jit as jit
 

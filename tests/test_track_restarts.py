@@ -18,21 +18,22 @@ DEVSET = Path(__file__).resolve().parents[2] / "shared" / "data" / "devset"
 
 @pytest.mark.skipif(not (DEVSET / "dev_steps_track.mcap").exists(), reason="needs ../shared/data/devset")
 def test_frames_whose_refinement_stops_off_the_truth_are_found_by_restarts():
-    """From frame 27, frames 30 and 31 (the object turns up to 8 degrees a frame) end off the truth
-    from the prediction and the last pose; without restarts the tracker says 'lost' there, with
-    them it tracks every frame within a degree and 2 mm (the default model, with view planes)."""
+    """From frame 27, some of frames 29 to 32 (the object turns up to 8 degrees a frame; which ones
+    moves with the model) end off the truth from the prediction and the last pose; without restarts
+    the tracker says 'lost' there, with them it tracks every frame within a degree and 2 mm (the
+    default model, with view planes)."""
     model = accumulate_recording(str(DEVSET / "dev_steps.mcap")).model
     truth = read_truth(str(DEVSET / "dev_steps_track.truth.json"))
 
     def run(restart_deg):
-        track = track_recording(model, str(DEVSET / "dev_steps_track.mcap"), frames=FrameRange(27, 33),
+        track = track_recording(model, str(DEVSET / "dev_steps_track.mcap"), frames=FrameRange(27, 34),
                                 params=TrackParams(restart_deg=restart_deg)).track
         errors = [pose_error(T, truth.pose_at(int(t))) if s == "tracked" else None
                   for t, T, s in zip(track.times_ns, track.poses, track.status)]
         return track.status, errors
 
     status, _ = run(None)
-    assert status[3:5] == ["lost"] * 2
+    assert status[:2] == ["tracked"] * 2 and status[2:6].count("lost") >= 2
     status, errors = run(5.0)
-    assert status == ["tracked"] * 6
+    assert status == ["tracked"] * 7
     assert max(e[0] for e in errors) < 1.0 and max(e[1] for e in errors) < 0.002
