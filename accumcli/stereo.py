@@ -236,12 +236,13 @@ def _propagate(left: Segments2D, right: Segments2D, li, rj, disparity, score, ac
     return out
 
 
-def _grey_map_of_pairs(a: np.ndarray, b: np.ndarray, li: np.ndarray, min_ncc: float = 0.9, min_pairs: int = 20):
-    """(gain, offset) that take this frame's right grey levels to the left's, from the patches
-    (P, n) of candidate pairs of left segments ``li`` (P,): over each left segment's best candidate
-    by NCC alone, where that is at least ``min_ncc``, the median contrast ratio and then the median
-    remaining difference of means; (1, 0) with fewer than ``min_pairs`` such segments."""
-    ncc, mean_a, mean_b, energy_a, energy_b = _correlation(a, b)
+def _grey_map_of_pairs(ncc, mean_a, mean_b, energy_a, energy_b, li: np.ndarray, min_ncc: float = 0.9,
+                       min_pairs: int = 20):
+    """(gain, offset) that take this frame's right grey levels to the left's, from the moments
+    (``_correlation``, each (P,)) of the patches of candidate pairs of left segments ``li`` (P,):
+    over each left segment's best candidate by NCC alone, where that is at least ``min_ncc``, the
+    median contrast ratio and then the median remaining difference of means; (1, 0) with fewer
+    than ``min_pairs`` such segments."""
     best = best_per_key(li, -ncc)
     best = best[(ncc[best] >= min_ncc) & (energy_b[best] > 1e-6)]
     if len(best) < min_pairs:
@@ -278,19 +279,20 @@ def _ncc(left_img, right_img, left: Segments2D, right: Segments2D, li, rj, param
     rows3 = np.repeat(rows[:, :, None], len(h), axis=2)
     a = sample(left_img, u_left[:, :, None] + h, rows3)     # (P, S, H)
     b = sample(right_img, u_right[:, :, None] + h, rows3)
-    gain, offset = _grey_map_of_pairs(a.reshape(len(li), -1), b.reshape(len(li), -1), li)
-    b = b * gain + offset
-    whole = _patch_score(a.reshape(len(li), -1), b.reshape(len(li), -1), params)
-    sides = [params.side_score - ((a[:, :, c].mean(axis=(1, 2)) - b[:, :, c].mean(axis=(1, 2)))
+    ncc, mean_a, mean_b, energy_a, energy_b = _correlation(a.reshape(len(li), -1), b.reshape(len(li), -1))
+    # the right patches in the left camera's grey levels: NCC is blind to the map, the moments follow it
+    gain, offset = _grey_map_of_pairs(ncc, mean_a, mean_b, energy_a, energy_b, li)
+    whole = _patch_score(ncc, mean_a, gain * mean_b + offset, energy_a, gain ** 2 * energy_b, a[0].size, params)
+    sides = [params.side_score - ((a[:, :, c].mean(axis=(1, 2)) - gain * b[:, :, c].mean(axis=(1, 2)) - offset)
                                   / params.brightness_tolerance) ** 2 for c in (slice(0, w), slice(w + 1, None))]
     return np.max([whole, *sides], axis=0)
 
 
-def _patch_score(a: np.ndarray, b: np.ndarray, params: StereoParams) -> np.ndarray:
-    """NCC minus brightness and contrast differences, row by row of (P, n) samples."""
-    ncc, mean_a, mean_b, energy_a, energy_b = _correlation(a, b)
+def _patch_score(ncc, mean_a, mean_b, energy_a, energy_b, n: int, params: StereoParams) -> np.ndarray:
+    """NCC minus brightness and contrast differences, from the moments (``_correlation``, each (P,))
+    of (P, n) samples."""
     # NCC alone cannot tell one step edge from another: compare brightness and contrast too
-    contrast = np.log((np.sqrt(energy_a / a.shape[1]) + 1.0) / (np.sqrt(energy_b / b.shape[1]) + 1.0))
+    contrast = np.log((np.sqrt(energy_a / n) + 1.0) / (np.sqrt(energy_b / n) + 1.0))
     return ncc - ((mean_a - mean_b) / params.brightness_tolerance) ** 2 - (contrast / params.contrast_tolerance) ** 2
 
 

@@ -400,15 +400,16 @@ def _refine_from(best: PoseEstimate, accepted: Segments, frame: StereoFrame, par
 def _samples_in_view(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, params: TrackParams,
                      per_segment: int | None = None):
     """Sample points (S, 3) and directions (S, 3), object frame, of the accepted segments in view at
-    ``T`` (``per_segment`` each, default ``samples_per_segment``) and their weights (S,) in the fit
-    and the coverage (``expected_weights``), or None when fewer than 3 segments are."""
+    ``T`` (``per_segment`` each, default ``samples_per_segment``), their weights (S,) in the fit
+    and the coverage (``expected_weights``) and the segment (S,) each samples, or None when fewer
+    than 3 segments are."""
     keep, beyond = _in_view(accepted, T, intr, params.aspect_margin_deg)
     if keep.sum() < 3:
         return None
     per_segment = per_segment or params.samples_per_segment
-    points, dirs, _ = model_samples(accepted.select(keep), per_segment)
+    points, dirs, owner = model_samples(accepted.select(keep), per_segment)
     weights = _ramp(None if beyond is None else beyond[keep], int(keep.sum()), params.expect_ramp_deg)
-    return points, dirs, np.repeat(weights, per_segment)
+    return points, dirs, weights[owner], owner
 
 
 def _gauss_newton(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, grads, search: float, tukey: float,
@@ -430,7 +431,7 @@ def _gauss_newton(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, gra
     samples = _samples_in_view(accepted, T, intr, params, params.coarse_samples_per_segment if coarse else None)
     if samples is None:
         return None
-    points_obj, dirs_obj, expected = samples
+    points_obj, dirs_obj, expected, _ = samples
     measurements = _measure(transform_points(T, points_obj), rotate_vectors(T, dirs_obj), intr, grads, search, params)
     if prior is not None:       # the prior's inverse variances per axis (rad^-2, m^-2)
         inverse = 1 / np.repeat([np.radians(params.prior_deg), params.prior_mm / 1000], 3) ** 2
@@ -489,25 +490,25 @@ def _verify_at(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, grads,
     if samples is None:
         n = int(visible(accepted, T, intr, params.aspect_margin_deg).sum())
         return PoseEstimate(T.copy(), float("inf"), 0, 0, "lost", reason=f"{n} accepted model segments in view (needs 3)")
-    points_obj, dirs_obj, expected = samples
+    points_obj, dirs_obj, expected, owner = samples
     measurements = _measure(transform_points(T, points_obj), rotate_vectors(T, dirs_obj), intr, grads, search, params)
     found = sum(int(np.sum(~np.isnan(c).all(axis=1))) for _, _, c in measurements)
     if found < 6:
         return PoseEstimate(T.copy(), float("inf"), 0, found, "lost",
                             reason=f"{found} model points found an image edge (needs 6)")
     shown = float(expected.sum()) / params.samples_per_segment / max(len(accepted), 1)
-    return _verify(T, points_obj, measurements, intr, tukey, params, expected, shown)
+    return _verify(T, points_obj, measurements, intr, tukey, params, expected, shown, owner)
 
 
 def _verify(T: np.ndarray, points_obj: np.ndarray, measurements, intr: StereoIntrinsics, tukey: float,
-            params: TrackParams, expected: np.ndarray, shown: float) -> PoseEstimate:
+            params: TrackParams, expected: np.ndarray, shown: float, owner: np.ndarray) -> PoseEstimate:
     """The estimate at the final pose ``T`` against the finest level's measurements: inliers, RMS,
     coverage (both images, each sample weighted by ``expected`` (S,), ``expected_weights``), the
     standard deviations of a Gauss-Newton increment (per axis the larger of ``sigma^2 (J^T W J)^-1``,
     sigma^2 the Tukey-weighted residual variance with 6 degrees of freedom removed, and the
-    variance clustered by model segment, ``_clustered_variance``) and the status of this one
-    pose ('tracked' or 'lost'; the tracker may make it 'ambiguous'). W holds the Tukey weights of
-    every sample found, also of those the fit weights down by ``expected``: a conservative figure
+    variance clustered by the model segment ``owner`` (S,) of each sample, ``_clustered_variance``)
+    and the status of this one pose ('tracked' or 'lost'; the tracker may make it 'ambiguous'). W
+    holds the Tukey weights of every sample found, also of those the fit weights down by ``expected``: a conservative figure
     (their residuals raise sigma^2). With the fit's own weights, two frames of the tracking
     scoreboard's sim_201 passed the limits 8 to 9 mm off.
 
@@ -537,7 +538,6 @@ def _verify(T: np.ndarray, points_obj: np.ndarray, measurements, intr: StereoInt
         information = H / max(sigma2, 1e-12)
         if np.linalg.cond(H) < 1e12:
             H_inv = np.linalg.inv(H)
-            owner = np.arange(len(points_obj)) // params.samples_per_segment   # the samples' segments
             rows = np.concatenate([owner[found] for _, found, _ in per_side])
             variance = np.maximum(np.diag(H_inv) * sigma2, _clustered_variance(H_inv, J, w * signed, rows))
             std = np.sqrt(np.maximum(variance, 0.0))
