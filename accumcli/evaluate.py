@@ -125,11 +125,17 @@ def score_segments(segments: Segments, edges: EdgeSamples, tol: Tolerances = Tol
 
 
 def evaluate_model(model: Segments, truth: Truth, tol: Tolerances = Tolerances()) -> dict:
-    """Scores of a model's accepted segments (confidence >= 0.5) against the truth."""
+    """Scores of a model's accepted segments (confidence >= 0.5) against the truth, and the
+    completeness of all its segments whatever their confidence (``completeness_any_confidence``:
+    what accumulation found but has not, or not yet, confirmed)."""
     edges = EdgeSamples.of(truth, tol)
     accepted = model.select(model.accepted)
     scores = score_segments(accepted, edges, tol).as_dict()
-    return {"segments": len(model), "accepted": scores.pop("segments"), **scores}
+    _, _, correct_for = classify(model, edges, tol)
+    covered = covered_samples(model, correct_for, edges, tol)
+    anywhere = float(covered[edges.counted].mean()) if edges.counted.any() else float("nan")
+    return {"segments": len(model), "accepted": scores.pop("segments"), **scores,
+            "completeness_any_confidence": anywhere}
 
 
 def frame_accuracy(segments_camera: Segments, T_camera_object: np.ndarray, edges: EdgeSamples,

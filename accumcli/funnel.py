@@ -9,6 +9,12 @@ correct 3D segments. Stage by stage, as fractions of the edge samples seen in th
    ``critical``; so this stage may exceed the previous one);
 4. ``correct_3d``: the frame's 3D segments cover the sample correctly (as in ``evaluate``).
 
+Over the whole recording, ``correct_twice``: the share of the samples that completeness counts
+which the single-frame segments of at least two frames cover correctly. An accumulator accepts what
+a second frame confirms, so this is about the completeness it can reach from these frames (a
+little more where merged pieces grow along an edge): the gap between it and the model's
+completeness is lost in accumulation, the gap below 1 in extraction.
+
 Which samples a frame shows: the truth's per-pose ``seen`` bits (base64 of numpy.packbits over
 the samples of all edges, in edge order) where it has them; otherwise (an approximation, said in
 the result) every sample that lies in front of the camera and inside both images and that the
@@ -89,8 +95,9 @@ def detected_by(segments_2d: np.ndarray, edges: EdgeSamples, T_camera_object: np
 
 
 def frame_funnel(segments_camera: Segments, doc: dict, T_camera_object: np.ndarray, edges: EdgeSamples,
-                 seen: np.ndarray | None, tol: Tolerances = Tolerances()) -> dict:
-    """Counts of seen samples reaching each stage in one frame (``doc``: the frames-file line)."""
+                 seen: np.ndarray | None, tol: Tolerances = Tolerances(), times_correct: np.ndarray | None = None) -> dict:
+    """Counts of seen samples reaching each stage in one frame (``doc``: the frames-file line).
+    ``times_correct``: (S,) int, incremented in place at the samples this frame covers correctly."""
     intr = doc.get("intrinsics")
     if seen is None:
         seen = approximate_seen(edges, T_camera_object, intr) if intr else edges.counted.copy()
@@ -111,24 +118,31 @@ def frame_funnel(segments_camera: Segments, doc: dict, T_camera_object: np.ndarr
             counts[stage] = int(len(np.unique(sample_of[keep])))
     segments = segments_camera.transformed(invert(T_camera_object), "object")
     _, _, correct_for = classify(segments, edges, tol)
-    counts["correct_3d"] = int((covered_samples(segments, correct_for, edges, tol) & seen).sum())
+    correct = covered_samples(segments, correct_for, edges, tol) & seen
+    if times_correct is not None:
+        times_correct += correct
+    counts["correct_3d"] = int(correct.sum())
     return counts
 
 
 def funnel(frames, truth, tol: Tolerances = Tolerances()) -> dict:
     """The funnel over ``frames`` (iterable of (timestamp_ns, Segments in the camera frame, line doc)):
-    each stage's share of the seen samples, summed over the frames with a truth pose."""
+    each stage's share of the seen samples, summed over the frames with a truth pose, and
+    ``funnel_correct_twice`` (module docstring)."""
     edges = EdgeSamples.of(truth, tol)
     bits = per_pose_seen(truth, len(edges.points))
     totals: dict[str, int] = {}
+    times_correct = np.zeros(len(edges.points), np.int64)
     for t_ns, segments, doc in frames:
         T = truth.pose_at(int(t_ns))
         if T is None:
             continue
         seen = bits.get(int(t_ns))
-        for key, value in frame_funnel(segments, doc, T, edges, seen, tol).items():
+        for key, value in frame_funnel(segments, doc, T, edges, seen, tol, times_correct).items():
             totals[key] = totals.get(key, 0) + value
     n = max(totals.get("seen", 0), 1)
     result = {f"funnel_{stage}": totals[stage] / n for stage in STAGES if stage in totals}
+    if edges.counted.any():
+        result["funnel_correct_twice"] = float((times_correct[edges.counted] >= 2).mean())
     result["funnel_seen_from"] = "truth per-frame bits" if bits else "projection (no occlusion)"
     return result

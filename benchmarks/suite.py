@@ -2,8 +2,12 @@
 
 Per recording: the single-frame funnel (``accum eval`` of ``accum extract --with-2d``: the share of
 the seen edge length detected in 2D, not critical, matched, correct in 3D), the single-frame
-near-object precision, the accumulated model's precision / completeness / background, and the
-accumulation's stereo pairs per second; then the median and the worst row of every column.
+near-object precision, the share of the counted edge length that single frames got right in at least
+two frames (``ok twice``: about what accumulation can reach from them), the share that any model
+segment covers whatever its confidence (``in model``), the accumulated model's precision /
+completeness / background, and the accumulation's stereo pairs per second; then the median and the
+worst row of every column. ``ok twice`` against 1 is what extraction loses, ``complete`` against
+``ok twice`` what accumulation loses (``in model`` against ``complete``: found, never confirmed).
 
 The set: simulated recordings with fixed seeds (the simulator's random scenes where it has them),
 the real chessboard (sample_data/), and every recording of ../shared/data/devset (but the tracking
@@ -30,7 +34,8 @@ SHARED = ROOT.parent / "shared" / "data"
 SIMULATED = 12
 COLUMNS = [("2d", "funnel_detected_2d", "high"), ("not crit", "funnel_not_critical", "high"),
            ("matched", "funnel_matched", "high"), ("3d ok", "funnel_correct_3d", "high"),
-           ("near prec", "accuracy_near_object", "high"), ("precision", "precision", "high"),
+           ("near prec", "accuracy_near_object", "high"), ("ok twice", "funnel_correct_twice", "high"),
+           ("in model", "completeness_any_confidence", "high"), ("precision", "precision", "high"),
            ("complete", "completeness", "high"), ("backgr", "background", "low"),
            ("pairs/s", "pairs_per_second", "high")]
 

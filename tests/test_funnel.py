@@ -5,17 +5,27 @@ from __future__ import annotations
 import numpy as np
 
 from accumcli.evaluate import EdgeSamples
-from accumcli.funnel import detected_by, frame_funnel
+from accumcli.evaluate import evaluate_model
+from accumcli.funnel import detected_by, frame_funnel, funnel
 from accumcli.model_io import Truth
 from accumcli.segments import Segments
 
 INTR = {"fx": 500.0, "fy": 500.0, "cx": 320.0, "cy": 240.0, "baseline": 0.1, "width": 640, "height": 480}
 
 
+def _truth(a, b, k=50, times_ns=(), poses=np.zeros((0, 4, 4))) -> Truth:
+    return Truth("gripper", "camera_left", np.array([a], float), np.array([b], float), [""],
+                 [np.full(k, 5)], np.array([True]), np.asarray(times_ns, np.int64), np.asarray(poses, float), {})
+
+
 def _edges(a, b, k=50) -> EdgeSamples:
-    truth = Truth("gripper", "camera_left", np.array([a], float), np.array([b], float), [""],
-                  [np.full(k, 5)], np.array([True]), np.zeros(0, np.int64), np.zeros((0, 4, 4)), {})
-    return EdgeSamples.of(truth)
+    return EdgeSamples.of(_truth(a, b, k))
+
+
+def _vertical_segment(y0: float, y1: float, confidence: float = 0.9) -> Segments:
+    """One segment on the edge x = 0, z = 1 m of the tests, from y0 to y1 (metres, camera frame)."""
+    return Segments("camera_left", np.array([[0.0, (y0 + y1) / 2, 1.0]]), np.array([[0.0, 1.0, 0.0]]),
+                    np.array([y1 - y0]), np.array([confidence]), np.array([1]))
 
 
 def test_a_segment_on_the_projection_detects_its_samples_and_one_beside_it_does_not():
@@ -49,3 +59,26 @@ def test_stages_follow_critical_and_matched_flags():
     doc["segments_2d"]["matched"] = [0]
     counts = frame_funnel(Segments.empty("camera_left"), doc, T, edges, None)
     assert counts["not_critical"] == 50 and counts["matched"] == 50
+
+
+def test_correct_twice_counts_the_edge_that_two_frames_got_right():
+    # the upper half of the edge right in frames 0 and 1, the lower half only in frame 2
+    T = np.eye(4)
+    T[2, 3] = 1.0
+    truth = _truth([0, -0.05, 0], [0, 0.05, 0], times_ns=[0, 10, 20], poses=[T, T, T])
+    frames = [(0, _vertical_segment(-0.05, 0.0), {}), (10, _vertical_segment(-0.05, 0.0), {}),
+              (20, _vertical_segment(0.0, 0.05), {})]
+    result = funnel(frames, truth)
+    assert 0.45 <= result["funnel_correct_twice"] <= 0.55
+    assert 0.45 <= result["funnel_correct_3d"] <= 0.55      # half the edge in each frame
+
+
+def test_completeness_any_confidence_counts_what_is_not_accepted():
+    truth = _truth([0, -0.05, 1], [0, 0.05, 1])
+    upper, lower = _vertical_segment(-0.05, 0.0, 0.9), _vertical_segment(0.0, 0.05, 0.3)
+    model = Segments("gripper", np.concatenate([upper.centers, lower.centers]),
+                     np.concatenate([upper.directions, lower.directions]),
+                     np.concatenate([upper.lengths, lower.lengths]), np.array([0.9, 0.3]), np.array([3, 1]))
+    scores = evaluate_model(model, truth)
+    assert scores["accepted"] == 1 and 0.45 <= scores["completeness"] <= 0.55
+    assert scores["completeness_any_confidence"] >= 0.98
