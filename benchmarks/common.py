@@ -27,12 +27,13 @@ def recording(name: str, **options) -> str:
     return str(path)
 
 
-def accumulate_params(view_planes: bool = True):
-    """The accumulation parameters of the scoreboards: the defaults, or ``accum accumulate --average-directions``."""
+def accumulate_params(view_planes: bool = True, motion: str = "gripper"):
+    """The accumulation parameters of the scoreboards: the defaults, or ``accum accumulate
+    --average-directions`` and / or ``--motion tracked``."""
     from accumcli.line_model import LineModelParams
     from accumcli.pipeline import AccumulateParams
 
-    return AccumulateParams(line_model=LineModelParams(view_planes=view_planes))
+    return AccumulateParams(line_model=LineModelParams(view_planes=view_planes), motion=motion)
 
 
 def run_child(code: str) -> dict:

@@ -85,9 +85,9 @@ def real_and_independent_rows() -> list[Row]:
     return rows
 
 
-def score(row: Row, view_planes: bool = True) -> dict:
+def score(row: Row, view_planes: bool = True, motion: str = "gripper") -> dict:
     """Extract (with 2D segments), evaluate the frames; accumulate (``view_planes`` False: with
-    ``accum accumulate --average-directions``), evaluate the model."""
+    ``accum accumulate --average-directions``; ``motion``: its ``--motion``), evaluate the model."""
     from accumcli.runs import (
         RecordingOptions,
         accumulate_recording,
@@ -96,12 +96,14 @@ def score(row: Row, view_planes: bool = True) -> dict:
     )
 
     options = RecordingOptions(object_frame=row.object_frame)
-    out = CACHE / ("suite" if view_planes else "suite_average_directions")   # the variant's files apart (make uncertainty)
+    # a variant's files apart (make uncertainty reads the default's)
+    out = CACHE / ("suite" + ("" if view_planes else "_average_directions") + ("" if motion == "gripper" else f"_{motion}"))
     out.mkdir(parents=True, exist_ok=True)
     frames_file, model_file = out / f"{row.name}.frames.jsonl", out / f"{row.name}.model.json"
     extract_recording(row.path, str(frames_file), options=options, with_2d=True)
     figures = evaluate_file(str(frames_file), row.truth)
-    result = accumulate_recording(row.path, [str(model_file)], options=options, params=accumulate_params(view_planes))
+    result = accumulate_recording(row.path, [str(model_file)], options=options,
+                                  params=accumulate_params(view_planes, motion))
     figures.update(evaluate_file(str(model_file), row.truth, support_face=row.support_face))
     if "surface_precision" in figures:   # judged by surface where the truth has faces (teabox README)
         figures["precision"], figures["background"] = figures["surface_precision"], figures["surface_background"]
@@ -149,16 +151,19 @@ def main(argv=None) -> int:
     parser.add_argument("--no-save", action="store_true", help="do not write docs/suite.md")
     parser.add_argument("--average-directions", action="store_true",
                         help="accumulate with --average-directions (a variant: docs/suite.md is not written)")
+    parser.add_argument("--motion", choices=["gripper", "tracked"], default="gripper",
+                        help="accumulate with this --motion (tracked: a variant, docs/suite.md is not written)")
     args = parser.parse_args(argv)
+    variant = args.average_directions or args.motion != "gripper"
     rows = simulated_rows() + real_and_independent_rows()
     if args.only:
         rows = [r for r in rows if args.only in r.name]
     t0 = time.perf_counter()
-    results = score_rows(rows, functools.partial(score, view_planes=not args.average_directions))
+    results = score_rows(rows, functools.partial(score, view_planes=not args.average_directions, motion=args.motion))
     lines = table(results, rows)
     print("\n".join(lines))
     print(f"\n{len(rows)} recordings in {time.perf_counter() - t0:.0f} s")
-    if not args.no_save and not args.only and not args.average_directions:
+    if not args.no_save and not args.only and not variant:
         doc = ROOT / "docs" / "suite.md"
         doc.write_text("# The scoreboard (`make suite`)\n\n" + __doc__.split("\n\n")[1].replace("\n", " ")
                        + f"\n\nLast run: {time.strftime('%Y-%m-%d')}, {os.cpu_count()} cores.\n\n"
