@@ -95,7 +95,8 @@ def detected_by(segments_2d: np.ndarray, edges: EdgeSamples, T_camera_object: np
 
 
 def frame_funnel(segments_camera: Segments, doc: dict, T_camera_object: np.ndarray, edges: EdgeSamples,
-                 seen: np.ndarray | None, tol: Tolerances = Tolerances(), times_correct: np.ndarray | None = None) -> dict:
+                 seen: np.ndarray | None, tol: Tolerances = Tolerances(),
+                 times_correct: np.ndarray | None = None) -> dict:
     """Counts of seen samples reaching each stage in one frame (``doc``: the frames-file line).
     ``times_correct``: (S,) int, incremented in place at the samples this frame covers correctly."""
     intr = doc.get("intrinsics")

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from accumcli.evaluate import EdgeSamples
-from accumcli.evaluate import evaluate_model
+from accumcli.evaluate import EdgeSamples, evaluate_model
 from accumcli.funnel import detected_by, frame_funnel, funnel
 from accumcli.model_io import Truth
 from accumcli.segments import Segments
