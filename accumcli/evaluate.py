@@ -114,14 +114,22 @@ class SegmentScores:
         return dict(self.__dict__)
 
 
-def score_segments(segments: Segments, edges: EdgeSamples, tol: Tolerances = Tolerances()) -> SegmentScores:
-    """Precision, completeness and background of ``segments`` (object frame)."""
-    distance, correct, correct_for = classify(segments, edges, tol)
-    covered = covered_samples(segments, correct_for, edges, tol)
+def _completeness(covered: np.ndarray, edges: EdgeSamples) -> float:
+    """The share of the counted samples that ``covered`` (S,) bool marks."""
+    return float(covered[edges.counted].mean()) if edges.counted.any() else float("nan")
+
+
+def _scores(segments: Segments, distance, correct, correct_for, edges: EdgeSamples, tol: Tolerances) -> SegmentScores:
+    """``score_segments`` from the segments' ``classify`` result."""
     n = max(len(segments), 1)
     return SegmentScores(len(segments), float(correct.sum() / n) if len(segments) else float("nan"),
-                         float(covered[edges.counted].mean()) if edges.counted.any() else float("nan"),
+                         _completeness(covered_samples(segments, correct_for, edges, tol), edges),
                          float((distance > tol.background_dist).sum() / n) if len(segments) else float("nan"))
+
+
+def score_segments(segments: Segments, edges: EdgeSamples, tol: Tolerances = Tolerances()) -> SegmentScores:
+    """Precision, completeness and background of ``segments`` (object frame)."""
+    return _scores(segments, *classify(segments, edges, tol), edges, tol)
 
 
 def evaluate_model(model: Segments, truth: Truth, tol: Tolerances = Tolerances()) -> dict:
@@ -129,11 +137,10 @@ def evaluate_model(model: Segments, truth: Truth, tol: Tolerances = Tolerances()
     completeness of all its segments whatever their confidence (``completeness_any_confidence``:
     what accumulation found but has not, or not yet, confirmed)."""
     edges = EdgeSamples.of(truth, tol)
-    accepted = model.select(model.accepted)
-    scores = score_segments(accepted, edges, tol).as_dict()
-    _, _, correct_for = classify(model, edges, tol)
-    covered = covered_samples(model, correct_for, edges, tol)
-    anywhere = float(covered[edges.counted].mean()) if edges.counted.any() else float("nan")
+    distance, correct, correct_for = classify(model, edges, tol)   # once for all segments, accepted or not
+    a = model.accepted
+    scores = _scores(model.select(a), distance[a], correct[a], correct_for[a], edges, tol).as_dict()
+    anywhere = _completeness(covered_samples(model, correct_for, edges, tol), edges)
     return {"segments": len(model), "accepted": scores.pop("segments"), **scores,
             "completeness_any_confidence": anywhere}
 

@@ -97,8 +97,8 @@ def score(row: Row, view_planes: bool = True, motion: str = "gripper") -> dict:
 
     options = RecordingOptions(object_frame=row.object_frame)
     # a variant's files apart (make uncertainty reads the default's)
-    variant = ("" if view_planes else "_average_directions") + ("" if motion == "gripper" else f"_{motion}")
-    out = CACHE / f"suite{variant}"
+    suffix = ("" if view_planes else "_average_directions") + ("" if motion == "gripper" else f"_{motion}")
+    out = CACHE / f"suite{suffix}"
     out.mkdir(parents=True, exist_ok=True)
     frames_file, model_file = out / f"{row.name}.frames.jsonl", out / f"{row.name}.model.json"
     extract_recording(row.path, str(frames_file), options=options, with_2d=True)
