@@ -28,7 +28,7 @@ from common import CACHE  # noqa: E402
 NEAR_M = 0.004
 DEPTH_REACH_M = 0.03
 ACROSS_RAY_M = 0.0015
-DIRECTION_BINS_DEG = (0, 1, 2, 4, 5.99, 6.01, 10, 20, 90)   # 6 deg alone: the default for a segment alone on its stretch
+DIRECTION_BINS_DEG = (0, 1, 2, 4, 6, 10, 20, 90)
 DEPTH_BINS_MM = (0, 0.25, 0.5, 1, 2, 4, 1000)
 
 

@@ -123,7 +123,6 @@ def test_a_receding_edge_alone_on_its_line_ends_where_its_left_pieces_end():
     side = (corners[3] - corners[0]) / np.linalg.norm(corners[3] - corners[0])   # its left side recedes
     on = np.linalg.norm(np.cross(seg.centers - corners[0], side), axis=1) < 0.003
     assert on.sum() >= 1
-    assert np.allclose(np.degrees(seg.extra["sigma_direction_rad"][on]), StereoParams().single_direction_sigma_deg)
     half = (seg.lengths[on] / 2)[:, None] * seg.directions[on]
     ends = np.stack([seg.centers[on] - half, seg.centers[on] + half], axis=1).reshape(-1, 3)
     pieces = result.left.endpoints()[result.left_index[on]].reshape(-1, 2)
@@ -199,3 +198,23 @@ def test_edge_ten_degrees_off_the_rows_is_matched_along_them():
         offset = np.linalg.norm(np.cross(seg.centers[on] - a, u), axis=1)
         print(f"side: {on.sum()} segments, max offset {1000 * offset.max():.2f} mm, {angle.max():.2f} deg")
         assert on.sum() >= 4 and offset.max() < 0.002 and angle.max() < 3.0    # seeds 0-4: up to 1.48 mm
+
+
+def test_a_piece_alone_near_the_rows_is_unsure_of_its_direction():
+    """The direction of a piece alone on its stretch comes from its two back-projected planes, which
+    nearly coincide for an edge near the epipolar direction: its sigma says so. A square of 14 mm
+    at 0.5 m turned 15 degrees (one piece per side): its sides near the rows came out up to 23
+    degrees off (a flat 6 degrees claimed before), those across the rows within about 1."""
+    square, corners = rotated_square([0.0, 0.0], 0.007, 15.0, 0.5)
+    seg = extract_frame(render_pair([square], seed=3), ExtractParams()).segments
+    sigma, error = {}, {}
+    for i in range(4):
+        side = (corners[(i + 1) % 4] - corners[i]) / np.linalg.norm(corners[(i + 1) % 4] - corners[i])
+        on = np.linalg.norm(np.cross(seg.centers - corners[i], side), axis=1) < 0.002
+        assert on.sum() >= 1
+        sigma[i] = np.degrees(seg.extra["sigma_direction_rad"][on])
+        error[i] = np.degrees(np.arccos(np.clip(np.abs(seg.directions[on] @ side), 0, 1)))
+        print(f"side {i}: sigma {sigma[i].round(1)} deg, error {error[i].round(1)} deg")
+        assert np.all(error[i] <= 2 * sigma[i])
+    near_rows, across_rows = np.concatenate([sigma[0], sigma[2]]), np.concatenate([sigma[1], sigma[3]])
+    assert near_rows.min() > 2.5 * across_rows.max()
