@@ -12,7 +12,7 @@ import numpy as np
 from .accumulate import Accumulator, StepStats, UpdateRule
 from .extract import ExtractParams, FrameSegments, extract_frame
 from .geometry import invert, mean_transform, pose_error, rotate_vectors
-from .line_model import FrameContext, LineModelParams, LineSegmentType, to_model
+from .line_model import FrameContext, LineModelParams, LineSegmentType, direction_known, to_model
 from .lines2d import StageTimes
 from .recording import StereoFrame
 from .segments import Segments
@@ -99,6 +99,9 @@ class LineAccumulation:
             T_camera_object, estimate = self._refined(frame, T_camera_object, extraction)
         context = FrameContext(T_camera_object, frame.intrinsics, frame.border_distance)
         stats = self.core.update(extraction.segments, invert(T_camera_object), context)
+        # accepted as the model is written (``to_model``: a segment's direction must be sure too)
+        stats.accepted = int(np.sum((self.core.log_odds >= 0) & direction_known(
+            self.core.entities, self.params.line_model.max_direction_sigma_deg)))
         log.debug("frame %d: %s", frame.index, ", ".join(f"{k} {v}" for k, v in stats.__dict__.items()))
         return AccumulationStep(frame, extraction, T_camera_object, stats, estimate)
 
@@ -106,7 +109,8 @@ class LineAccumulation:
                  extraction: FrameSegments) -> tuple[np.ndarray, PoseEstimate | None]:
         p = self.params
         track = p.track
-        model = to_model(self.core.entities, self.core.confidence, self.core.observations, uncertainty=False)
+        model = to_model(self.core.entities, self.core.confidence, self.core.observations, uncertainty=False,
+                         max_direction_sigma_deg=self.params.line_model.max_direction_sigma_deg)
         if model.accepted.sum() < p.min_tracking_segments:
             # bootstrap: until enough segments are accepted, refine against the tentative ones too
             # (the background among them does not follow the object and falls to the robust weights;
@@ -128,7 +132,8 @@ class LineAccumulation:
     def model(self) -> Segments:
         """The current model: every live segment with its confidence and observation count (with
         tracked motion, moved into the object frame by the mean offset; see the class docstring)."""
-        model = to_model(self.core.entities, self.core.confidence, self.core.observations)
+        model = to_model(self.core.entities, self.core.confidence, self.core.observations,
+                         max_direction_sigma_deg=self.params.line_model.max_direction_sigma_deg)
         if not self.T_recorded_model:
             return model
         T_object_model = mean_transform(np.stack(self.T_recorded_model))

@@ -11,7 +11,7 @@ from scipy.spatial.transform import Rotation
 
 from accumcli.accumulate import Accumulator, UpdateRule, one_to_one
 from accumcli.geometry import invert, make_transform, transform_points
-from accumcli.line_model import FrameContext, LineModelParams, LineSegmentType, sigmas
+from accumcli.line_model import UNSURE_CONFIDENCE, FrameContext, LineModelParams, LineSegmentType, sigmas, to_model
 from accumcli.recording import StereoIntrinsics
 from accumcli.segments import Segments
 
@@ -293,3 +293,31 @@ def test_association_of_an_uncertain_far_segment_and_a_precise_near_one():
     again = kind.observe(_segment_at([0.0, 0.0, 0.8], 0.0033).transformed(invert(T), "gripper"), context)
     merged = kind.merge(model, again, np.array([0]), np.array([0]), context)
     assert abs(sigmas(merged)[0][0] - 0.0033 / np.sqrt(2)) < 1e-9
+
+
+def test_a_confirmed_segment_whose_direction_is_unsure_is_not_accepted_until_another_aspect_pins_it():
+    """A piece alone on its stretch near the epipolar direction carries a direction sigma of 15
+    degrees: however often one view confirms it, the model does not accept it (confidence written
+    under 0.5); a second view 40 degrees about the line pins its direction through the two planes,
+    and it is accepted."""
+    kind = LineSegmentType()
+    limit = LineModelParams().max_direction_sigma_deg
+    observed = []
+    for turn_deg in (0.0, 40.0):
+        T = make_transform(Rotation.from_rotvec([0, np.radians(turn_deg), 0]).as_matrix(), [0.0, 0.0, 0.5])
+        segment = _one_segment()
+        segment.extra["sigma_direction_rad"] = np.array([np.radians(15.0)])
+        observed.append((kind.observe(segment, FrameContext(T, INTR)), T))
+    one_aspect = observed[0][0]
+    for _ in range(3):
+        one_aspect = kind.merge(one_aspect, observed[0][0], np.array([0]), np.array([0]),
+                                FrameContext(observed[0][1], INTR))
+    model = to_model(one_aspect, np.array([0.95]), np.array([4]), max_direction_sigma_deg=limit)
+    assert np.degrees(model.extra["sigma_direction_rad"][0]) > limit
+    assert model.confidence[0] == UNSURE_CONFIDENCE and not model.accepted[0]
+    assert to_model(one_aspect, np.array([0.95]), np.array([4]), max_direction_sigma_deg=None).accepted[0]
+    two_aspects = kind.merge(one_aspect, observed[1][0], np.array([0]), np.array([0]),
+                             FrameContext(observed[1][1], INTR))
+    model = to_model(two_aspects, np.array([0.95]), np.array([5]), max_direction_sigma_deg=limit)
+    assert np.degrees(model.extra["sigma_direction_rad"][0]) < limit
+    assert model.confidence[0] == 0.95 and model.accepted[0]
