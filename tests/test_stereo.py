@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 
 from accumcli.extract import ExtractParams, extract_frame
-from accumcli.stereo import StereoParams
 
 from .scenes import render_pair, quad, rotated_square
 
