@@ -103,6 +103,11 @@ def extraction_options(func):
         click.option("--critical-ends/--no-critical-ends", default=True, show_default=True,
                      help="Triangulate such critical segments from their edge's ends, where disparity is "
                           "defined (--no-critical-ends: reject them, as the paper does)."),
+        click.option("--row-offset", type=click.FloatRange(-5.0, 5.0), default=0.0, show_default=True,
+                     metavar="PX",
+                     help="The right image's rows lie this many pixels below the left's (a calibration a "
+                          "little off): disparities along the rows are corrected. extract and accumulate warn "
+                          "when the edges' junctions show such an offset, and name the value to try."),
         click.option("--depth-range", default="0.2:3.0", show_default=True, metavar="MIN:MAX",
                      callback=library_value(lambda text: number_pair(text, ":", "MIN:MAX metres", positive=True)),
                      help="Depths searched by stereo matching, metres."),
@@ -121,7 +126,7 @@ def extraction_options(func):
             LineParams(detector=kwargs.pop("detector"), segment_length_px=kwargs.pop("segment_length"),
                        gradient_threshold=kwargs.pop("gradient_threshold")),
             StereoParams(min_depth_m=near, max_depth_m=far, critical_angle_deg=kwargs.pop("critical_angle"),
-                         critical_by_ends=kwargs.pop("critical_ends")))
+                         critical_by_ends=kwargs.pop("critical_ends"), row_offset_px=kwargs.pop("row_offset")))
         return func(*args, **kwargs)
 
     return wrapper

@@ -76,7 +76,7 @@ median 0.598 and worst 0.263 unchanged (rows within the run-to-run noise of docs
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -125,6 +125,7 @@ class StereoParams:
     end_junction_px: float = 4.0         # ... of a triangulated segment ending this near it
     end_max_depth_ratio: float = 1.5     # ends farther apart in depth: an occluded edge, not a receding one
     end_agree_px: float = 2.0            # a sure block match inside a span this far from the interpolation refutes it
+    row_offset_px: float = 0.0           # the right image's rows lie this much below the left's (``row_check``)
 
 
 @dataclass
@@ -315,6 +316,9 @@ def triangulate(left: Segments2D, right: Segments2D, m: Matches, intr: StereoInt
     """3D local segments (left camera frame) of the matches, and the (K,) indices of ``m`` they come from."""
     if len(m.left) == 0:
         return Segments.empty(frame_id), np.zeros(0, np.int64)
+    if params.row_offset_px:   # a row offset dy moves an edge's crossing of a row by dy times its cotangent
+        line = left.line_direction[m.left]
+        m = replace(m, disparity=m.disparity - params.row_offset_px * line[:, 0] / line[:, 1])
     n_right_lines = int(right.line_id.max()) + 1
     stretch_key = left.line_id[m.left] * n_right_lines + right.line_id[m.right]
     _, stretch = np.unique(stretch_key, return_inverse=True)

@@ -20,6 +20,7 @@ from ..model_io import read_truth, write_json_lines, write_model, write_ply
 from ..motion import MotionParams, corrected, frame_to_frame, fuse, object_segments, refined_on_model
 from ..outputs import OutputSet
 from ..pipeline import AccumulateParams, LineAccumulation
+from ..row_check import RowCheck
 from ..segments import Segments
 from .base import FrameRange, Progress, RecordingOptions, no_progress, nothing_done
 from .checks import check_truth_matches
@@ -37,6 +38,7 @@ class AccumulationResult:
     frames whose refined pose was used (tracked motion), the wall time and the files written."""
 
     model: Segments
+    row_warning: str | None = None   # what the rows' check (``row_check``) found, None when nothing
     frames: int = 0
     skipped: dict = field(default_factory=dict)
     rows: list = field(default_factory=list)
@@ -83,7 +85,7 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
         workers = resolve_workers(workers, total)
         acc = LineAccumulation(params, rec.object_frame, rec.camera_frame)
         result = AccumulationResult(acc.model(), times=acc.times)
-        step, done = None, 0
+        step, done, rows = None, 0, RowCheck()
 
         def frames_with_pose():
             nonlocal done
@@ -109,6 +111,7 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
             for frame, extraction in extractions:
                 step = acc.step(frame, frame.T_camera_object, extraction,
                                 T_corrected=None if poses is None else poses[frame.index])
+                rows.add(step.extraction, frame.intrinsics)
                 row = {"frame_index": frame.index, "timestamp_ns": frame.timestamp_ns, **step.stats.__dict__}
                 if step.tracking is not None:
                     row.update(tracking=step.tracking.status, residual_px=step.tracking.residual_px)
@@ -130,6 +133,9 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
             raise nothing_done(recording, f"no frame in {frames} has a pose of {rec.object_frame!r} in "
                                           f"{rec.camera_frame!r}; nothing was accumulated", result.skipped)
         result.model = acc.model()
+        result.row_warning = rows.warning(params.extract.stereo.row_offset_px)
+        if result.row_warning:
+            log.warning("%s: %s", recording, result.row_warning)
         result.refined_frames = sum(not np.allclose(T, np.eye(4)) for T in acc.T_recorded_model)
         if edges is not None:   # the last row scored this very model
             result.scores = {"segments": result.accepted,

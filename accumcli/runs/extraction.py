@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass, field
 
@@ -12,21 +13,26 @@ from ..geometry import quat_from_transform
 from ..lines2d import StageTimes
 from ..model_io import FramesWriter
 from ..outputs import OutputSet
+from ..row_check import RowCheck
 from .base import FrameRange, Progress, RecordingOptions, no_progress, nothing_done
 from .frame_logs import rerun_log
 from .parallel import extracted_frames, resolve_workers
+
+log = logging.getLogger("accumcli")
 
 
 @dataclass
 class ExtractionResult:
     """Counts summed over the frames (``segments``, ``left_2d``, ``critical``, ``unmatched``), the
-    per-stage times (seconds, summed), the wall time and the files written."""
+    per-stage times (seconds, summed), the wall time, the files written and the warning of the rows'
+    check (``row_check``; None when the rows agree or the frames cannot tell)."""
 
     frames: int = 0
     totals: dict = field(default_factory=lambda: {"segments": 0, "left_2d": 0, "critical": 0, "critical_3d": 0, "unmatched": 0})
     times: StageTimes = field(default_factory=StageTimes)
     seconds: float = 0.0
     outputs: list = field(default_factory=list)
+    row_warning: str | None = None
 
     def per_frame(self, key: str) -> float:
         return self.totals[key] / max(self.frames, 1)
@@ -51,6 +57,7 @@ def extract_recording(recording, output, *, params: ExtractParams = ExtractParam
     outputs = OutputSet([output, rrd])
     result = ExtractionResult(outputs=[p for p in (output, rrd) if p])
     t0 = time.perf_counter()
+    rows = RowCheck()
     with options.open(recording, require_pose=False) as rec, outputs:
         total = frames.check(rec)
         with FramesWriter(outputs.open(output)) as out, rerun_log(outputs, rrd, "extract") as viz:
@@ -68,6 +75,7 @@ def extract_recording(recording, output, *, params: ExtractParams = ExtractParam
                     header["T_camera_object"] = {"translation": np.round(translation, 9).tolist(),
                                                  "rotation_xyzw": np.round(quat, 9).tolist()}
                 out.write(extraction.segments, frame.timestamp_ns, **header)
+                rows.add(extraction, frame.intrinsics)
                 if viz:
                     viz.extraction(frame, extraction)
                 result.frames += 1
@@ -76,5 +84,8 @@ def extract_recording(recording, output, *, params: ExtractParams = ExtractParam
                 progress(result.frames, total)
             if result.frames == 0:
                 raise nothing_done(recording, f"no stereo frame could be read in frames {frames}")
+    result.row_warning = rows.warning(params.stereo.row_offset_px)
+    if result.row_warning:
+        log.warning("%s: %s", recording, result.row_warning)
     result.seconds = time.perf_counter() - t0
     return result
