@@ -30,7 +30,6 @@ own geometry needs no extra detection.
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -38,8 +37,6 @@ from scipy.spatial import cKDTree
 
 from .extract import FrameSegments
 from .recording import StereoIntrinsics
-
-log = logging.getLogger("accumcli")
 
 JUNCTION_PX = 4.0
 MIN_ANGLE_DEG = 30.0
