@@ -30,13 +30,17 @@ own geometry needs no extra detection.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from .extract import FrameSegments
+from .grouping import group_range
 from .recording import StereoIntrinsics
+
+log = logging.getLogger("accumcli")
 
 JUNCTION_PX = 4.0
 MIN_ANGLE_DEG = 30.0
@@ -64,10 +68,9 @@ def junction_samples(extraction: FrameSegments, intrinsics: StereoIntrinsics) ->
     if len(index) < 2:
         return np.zeros(0)
     center = np.column_stack([s.extra["u"][index], s.extra["v"][index]])
-    ends = s.endpoints()[index]                                                       # (n, 2, 3) metres
-    uv = np.stack([intrinsics.fx * ends[..., 0] / ends[..., 2] + intrinsics.cx,
-                   intrinsics.fy * ends[..., 1] / ends[..., 2] + intrinsics.cy], axis=-1)
-    disparity = intrinsics.fx * intrinsics.baseline / ends[..., 2]                    # (n, 2) px
+    uv, uv_right, _ = intrinsics.project(s.endpoints()[index].reshape(-1, 3))          # the 3D ends, px
+    disparity = (uv[:, 0] - uv_right[:, 0]).reshape(-1, 2)                             # (n, 2) px
+    uv = uv.reshape(-1, 2, 2)
     t = np.sum((uv - center[:, None, :]) * line[:, None, :], axis=-1)                  # along the line, px
     span = t[:, 1] - t[:, 0]
     slope = (disparity[:, 1] - disparity[:, 0]) / np.where(np.abs(span) > 1e-6, span, 1e-6)
@@ -86,10 +89,9 @@ def junction_samples(extraction: FrameSegments, intrinsics: StereoIntrinsics) ->
     # both lines end there (an L-junction): an edge that runs on through it (T-junction, crossing) does not
     left = extraction.left
     line_id = left.line_id[extraction.left_index[index]]
-    lo = np.full(int(left.line_id.max()) + 1, np.inf)
-    hi = np.full_like(lo, -np.inf)
-    np.minimum.at(lo, left.line_id, left.t - left.lengths / 2)
-    np.maximum.at(hi, left.line_id, left.t + left.lengths / 2)
+    n_lines = int(left.line_id.max()) + 1
+    lo = group_range(left.line_id, n_lines, left.t - left.lengths / 2)[0]          # each line's extent, px
+    hi = group_range(left.line_id, n_lines, left.t + left.lengths / 2)[1]
     t_piece = left.t[extraction.left_index[index]]
     near = np.ones(len(a), bool)
     for k, t_k in ((a, t_a), (b, t_b)):
@@ -104,17 +106,19 @@ def junction_samples(extraction: FrameSegments, intrinsics: StereoIntrinsics) ->
 
 @dataclass
 class RowCheck:
-    """The row offset's samples over a run's frames (``add``), and what they say (``estimate``)."""
+    """The row offset's samples over a run's frames (``add``), what they say (``estimate``) and the
+    warning of the run (``report``)."""
 
     samples: list = field(default_factory=list)
-    count: int = 0
+
+    @property
+    def count(self) -> int:
+        return sum(len(v) for v in self.samples)
 
     def add(self, extraction: FrameSegments, intrinsics: StereoIntrinsics) -> None:
-        if self.count >= MAX_SAMPLES:
-            return
-        new = junction_samples(extraction, intrinsics)[:MAX_SAMPLES - self.count]
-        self.samples.append(new)
-        self.count += len(new)
+        room = MAX_SAMPLES - self.count
+        if room > 0:
+            self.samples.append(junction_samples(extraction, intrinsics)[:room])
 
     def estimate(self) -> tuple[float, float, int] | None:
         """(median offset px, spread px, samples) when the samples are enough and agree, else None."""
@@ -136,3 +140,10 @@ class RowCheck:
         return (f"the rectified images' rows disagree: the right image's rows lie {abs(median):.2f} px {side} "
                 f"the left's (median of {n} edge junctions, spread {spread:.2f} px), which skews the depth of edges "
                 f"near the rows; check the stereo calibration, or try --row-offset {row_offset_px + median:.2f}")
+
+    def report(self, recording, row_offset_px: float = 0.0) -> str | None:
+        """``warning``, also logged as the run's warning about ``recording``."""
+        text = self.warning(row_offset_px)
+        if text:
+            log.warning("%s: %s", recording, text)
+        return text

@@ -133,9 +133,7 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
             raise nothing_done(recording, f"no frame in {frames} has a pose of {rec.object_frame!r} in "
                                           f"{rec.camera_frame!r}; nothing was accumulated", result.skipped)
         result.model = acc.model()
-        result.row_warning = rows.warning(params.extract.stereo.row_offset_px)
-        if result.row_warning:
-            log.warning("%s: %s", recording, result.row_warning)
+        result.row_warning = rows.report(recording, params.extract.stereo.row_offset_px)
         result.refined_frames = sum(not np.allclose(T, np.eye(4)) for T in acc.T_recorded_model)
         if edges is not None:   # the last row scored this very model
             result.scores = {"segments": result.accepted,

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import logging
 import time
 from dataclasses import dataclass, field
 
@@ -17,8 +16,6 @@ from ..row_check import RowCheck
 from .base import FrameRange, Progress, RecordingOptions, no_progress, nothing_done
 from .frame_logs import rerun_log
 from .parallel import extracted_frames, resolve_workers
-
-log = logging.getLogger("accumcli")
 
 
 @dataclass
@@ -84,8 +81,6 @@ def extract_recording(recording, output, *, params: ExtractParams = ExtractParam
                 progress(result.frames, total)
             if result.frames == 0:
                 raise nothing_done(recording, f"no stereo frame could be read in frames {frames}")
-    result.row_warning = rows.warning(params.stereo.row_offset_px)
-    if result.row_warning:
-        log.warning("%s: %s", recording, result.row_warning)
+    result.row_warning = rows.report(recording, params.stereo.row_offset_px)
     result.seconds = time.perf_counter() - t0
     return result
