@@ -57,13 +57,13 @@ def test_refinement_converges_from_a_perturbed_pose(noisy_pair, model_of_exact):
             assert rotation < 0.3 and translation < 0.001, (rotation, translation)
 
 
-def test_refined_on_model_corrects_a_fused_pose_within_its_gate_only(noisy_pair, model_of_exact):
-    """``motion.refined_on_model``: a fused pose 1.5 deg / 4 mm off comes back within 0.3 deg / 1 mm;
-    the same refinement from a pose off by more than the gate allows (or against a model of two
-    segments) leaves the pose as it was."""
+def test_on_model_corrects_a_fused_pose_within_its_gate_only(noisy_pair, model_of_exact):
+    """``motion.on_model``: a fused pose 1.5 deg / 4 mm off, corrected by the refinement on the model,
+    comes back within 0.3 deg / 1 mm; the same refinement from a pose off by more than the gate
+    allows (or against a model of two segments) measures nothing."""
     import dataclasses
 
-    from accumcli.motion import MotionParams, refined_on_model
+    from accumcli.motion import MotionParams, corrected, on_model
 
     exact, _ = noisy_pair
     truth = read_truth(exact.replace(".mcap", ".truth.json"))
@@ -73,11 +73,13 @@ def test_refined_on_model_corrects_a_fused_pose_within_its_gate_only(noisy_pair,
         frame = next(rec.frames(2, 3))
     T_true = truth.pose_at(frame.timestamp_ns)
     off = perturbed(T_true, 1.5, 0.004, 7)
-    rotation, translation = pose_error(refined_on_model(accepted, frame, off, TrackParams()), T_true)
+    c, information = on_model(accepted, frame, off, TrackParams())
+    rotation, translation = pose_error(corrected(off, c), T_true)
     assert rotation < 0.3 and translation < 0.001, (rotation, translation)
+    assert np.all(np.linalg.eigvalsh(information) > 0)
     tight = dataclasses.replace(params, model_gate_deg=0.5, model_gate_mm=1.0)
-    assert refined_on_model(accepted, frame, off, TrackParams(), params=tight) is off
-    assert refined_on_model(accepted.select(np.arange(2)), frame, off, TrackParams()) is off
+    assert on_model(accepted, frame, off, TrackParams(), params=tight) is None
+    assert on_model(accepted.select(np.arange(2)), frame, off, TrackParams()) is None
 
 
 def _cone_beyond(model: Segments, T: np.ndarray, degrees: float) -> Segments:
@@ -649,6 +651,26 @@ def test_fuse_drops_agreeing_links_that_are_jointly_too_far():
     carried = (fuse(links, n, dataclasses.replace(params, gate_chi2=np.inf)) + error)[20:22]
     assert (np.abs(gated) < 0.1 * wrong).all()
     assert (np.abs(carried) > 0.25 * wrong).all()
+
+
+def test_fuse_takes_the_gauge_from_measurements_on_the_model():
+    """Exact links hold twelve frames together, so without more they all keep the mean of their recorded
+    errors; exact measurements on the model (``on_model``) of four of them remove that common error
+    from all twelve."""
+    from accumcli.motion import MotionParams, fuse
+
+    rng = np.random.default_rng(4)
+    n = 12
+    error = np.hstack([rng.normal(0, np.radians(0.8), (n, 3)), rng.normal(0, 0.002, (n, 3))])
+    error -= error.mean(axis=0) - np.radians([0.5, 0, 0, 0, 0, 0]) - [0, 0, 0, 0.002, 0, 0]   # mean 0.5 deg, 2 mm
+    params = MotionParams()
+    seen = params.information_scale * np.diag(np.repeat([1 / np.radians(0.02) ** 2, 1 / 0.00005 ** 2], 3))
+    links = {(k - 1, k): (error[k - 1] - error[k], seen) for k in range(1, n)}
+    alone = fuse(links, n, params) + error
+    measured = fuse(links, n, params, {k: (-error[k], seen) for k in (1, 4, 7, 10)}) + error
+    assert np.allclose(alone, alone.mean(axis=0), atol=1e-4)
+    assert abs(np.degrees(alone[:, 0]).mean()) > 0.45 and abs(alone[:, 3].mean()) > 0.0018
+    assert np.degrees(np.abs(measured[:, :3])).max() < 0.02 and np.abs(measured[:, 3:]).max() < 0.0001
 
 
 def test_fuse_takes_from_a_link_only_the_directions_it_sees():
