@@ -139,9 +139,9 @@ def fuse(links: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]], n: int, pa
     seen rotation and translation directions (for the difference of two poses a median |N(0, 2 s^2)|;
     never below the relative sigma ``r``). All frames together minimise
     ``sum |x_k|^2 / s^2 + sum (x_k - x_j - c)^T L (x_k - x_j - c) + sum (x_k - m_k)^T M (x_k - m_k)``,
-    one block-banded system: the
-    images decide the directions they see (lateral, in-plane), the recorded poses the rest (depth and
-    out-of-plane rotation of a small object: a link's 1 sigma there is 1-3 mm and about 0.5 deg).
+    one block-banded system: the images decide the directions they see (lateral, in-plane), the
+    recorded poses the rest (depth and out-of-plane rotation of a small object: a link's 1 sigma there
+    is 1-3 mm and about 0.5 deg).
     A link beyond ``gate_sigmas`` of ``sqrt(2 s^2 + r^2)`` on any axis, or whose chi-square against
     it over all six, ``sum c^2 / (2 s^2 + r^2)``, exceeds ``gate_chi2``, is dropped, and then, one at a
     time, the link furthest from the fused poses while its chi-square ``e^T L e`` exceeds
@@ -229,9 +229,9 @@ def on_model(model: Segments, frame, T_fused: np.ndarray, track: TrackParams, gr
              params: MotionParams = MotionParams()) -> tuple[np.ndarray, np.ndarray] | None:
     """Frame's fused pose T_camera_object (4, 4) refined on ``model`` (the accepted segments of the
     accumulation with the fused poses, object frame) as ``frame_to_frame`` refines, with its prior
-    about the fused pose: its correction of the fused pose (``correction``) and information
-    (``link_information``), or None unless that refinement is 'tracked' and moves the fused pose by
-    at most ``model_gate_deg`` and ``model_gate_mm``."""
+    about the fused pose: the refinement's correction of the fused pose (``correction``) and its
+    information (``link_information``) for ``fuse``; None unless the refinement is 'tracked' and
+    moves the fused pose by at most ``model_gate_deg`` and ``model_gate_mm``."""
     found = frame_to_frame(model, frame, T_fused, track, gradients, params)
     if found is None:
         return None

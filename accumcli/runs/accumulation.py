@@ -200,10 +200,11 @@ def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str,
     by pass 1 and replayed after), by the passes of ``motion``: pass 1 accumulates with the recorded
     poses, pass 2 measures the frame-to-frame corrections against pass 1's accepted segments, ``fuse``
     combines them with the recorded poses, pass 3 accumulates with the fused poses and refines each
-    on that model (``on_model``), and ``fuse`` solves again with these refinements. The models of these passes average the stereo directions
-    (``view_planes`` off): the planes trust the poses to half a degree, and these poses are not yet
-    repaired (``make motion`` with view-plane models in every pass: worst shortfall 0.090 against
-    0.048)."""
+    on that model (``on_model``), and ``fuse`` solves again with these refinements. The models of
+    these passes average the stereo directions (``view_planes`` off): the planes trust the poses to
+    half a degree, and these poses are not yet repaired (``make motion`` with view-plane models in
+    every pass: worst shortfall 0.090 against 0.048; in pass 3 alone, median pose error 0.57 deg
+    against 0.53)."""
     averaging = replace(params.line_model, view_planes=False)
 
     def accepted(extractions, pose_of) -> Segments:
