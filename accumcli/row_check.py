@@ -116,9 +116,13 @@ class RowCheck:
         return sum(len(v) for v in self.samples)
 
     def add(self, extraction: FrameSegments, intrinsics: StereoIntrinsics) -> None:
+        """One frame's samples, kept while fewer than ``MAX_SAMPLES`` are (a frame without any adds
+        nothing: the list does not grow with the recording's length)."""
         room = MAX_SAMPLES - self.count
         if room > 0:
-            self.samples.append(junction_samples(extraction, intrinsics)[:room])
+            found = junction_samples(extraction, intrinsics)[:room]
+            if len(found):
+                self.samples.append(found)
 
     def estimate(self) -> tuple[float, float, int] | None:
         """(median offset px, spread px, samples) when the samples are enough and agree, else None."""

@@ -125,7 +125,9 @@ class StereoParams:
     end_junction_px: float = 4.0         # ... of a triangulated segment ending this near it
     end_max_depth_ratio: float = 1.5     # ends farther apart in depth: an occluded edge, not a receding one
     end_agree_px: float = 2.0            # a sure block match inside a span this far from the interpolation refutes it
-    row_offset_px: float = 0.0           # the right image's rows lie this much below the left's (``row_check``)
+    # the right image's rows lie this much below the left's (``row_check``): the matched pieces' disparities
+    # are corrected in ``triangulate``; the critical pieces' run ends (``critical``, block matching) are not
+    row_offset_px: float = 0.0
 
 
 @dataclass
