@@ -100,8 +100,9 @@ class LineAccumulation:
         context = FrameContext(T_camera_object, frame.intrinsics, frame.border_distance)
         stats = self.core.update(extraction.segments, invert(T_camera_object), context)
         # accepted as the model is written (``to_model``: a segment's direction must be sure too)
+        lm = self.params.line_model
         stats.accepted = int(np.sum((self.core.log_odds >= 0) & direction_known(
-            self.core.entities, self.params.line_model.max_direction_sigma_deg)))
+            self.core.entities, lm.max_direction_sigma_deg, lm.single_aspect_sigma_deg)))
         log.debug("frame %d: %s", frame.index, ", ".join(f"{k} {v}" for k, v in stats.__dict__.items()))
         return AccumulationStep(frame, extraction, T_camera_object, stats, estimate)
 
@@ -110,7 +111,8 @@ class LineAccumulation:
         p = self.params
         track = p.track
         model = to_model(self.core.entities, self.core.confidence, self.core.observations, uncertainty=False,
-                         max_direction_sigma_deg=self.params.line_model.max_direction_sigma_deg)
+                         max_direction_sigma_deg=self.params.line_model.max_direction_sigma_deg,
+                         single_aspect_sigma_deg=self.params.line_model.single_aspect_sigma_deg)
         if model.accepted.sum() < p.min_tracking_segments:
             # bootstrap: until enough segments are accepted, refine against the tentative ones too
             # (the background among them does not follow the object and falls to the robust weights;
@@ -133,7 +135,8 @@ class LineAccumulation:
         """The current model: every live segment with its confidence and observation count (with
         tracked motion, moved into the object frame by the mean offset; see the class docstring)."""
         model = to_model(self.core.entities, self.core.confidence, self.core.observations,
-                         max_direction_sigma_deg=self.params.line_model.max_direction_sigma_deg)
+                         max_direction_sigma_deg=self.params.line_model.max_direction_sigma_deg,
+                         single_aspect_sigma_deg=self.params.line_model.single_aspect_sigma_deg)
         if not self.T_recorded_model:
             return model
         T_object_model = mean_transform(np.stack(self.T_recorded_model))

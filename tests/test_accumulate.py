@@ -11,7 +11,15 @@ from scipy.spatial.transform import Rotation
 
 from accumcli.accumulate import Accumulator, UpdateRule, one_to_one
 from accumcli.geometry import invert, make_transform, transform_points
-from accumcli.line_model import UNSURE_CONFIDENCE, FrameContext, LineModelParams, LineSegmentType, sigmas, to_model
+from accumcli.line_model import (
+    OBSERVATION_ONLY,
+    UNSURE_CONFIDENCE,
+    FrameContext,
+    LineModelParams,
+    LineSegmentType,
+    sigmas,
+    to_model,
+)
 from accumcli.recording import StereoIntrinsics
 from accumcli.segments import Segments
 
@@ -320,4 +328,40 @@ def test_a_confirmed_segment_whose_direction_is_unsure_is_not_accepted_until_ano
                              FrameContext(observed[1][1], INTR))
     model = to_model(two_aspects, np.array([0.95]), np.array([5]), max_direction_sigma_deg=limit)
     assert np.degrees(model.extra["sigma_direction_rad"][0]) < limit
+    assert model.confidence[0] == 0.95 and model.accepted[0]
+
+
+def test_a_segment_seen_from_one_aspect_must_be_surer_of_its_direction():
+    """Confirmed four times from one aspect by pieces claiming 4 degrees, a segment claims 2 degrees
+    (four observations' information), within the 5-degree limit but over the 1.5 degrees required
+    of one aspect: it is held back. A second aspect 30 degrees about the line lifts the
+    one-aspect limit, and it is accepted. The observations' own view planes stay out of the model."""
+    params = LineModelParams()
+    kind = LineSegmentType(params)
+    observed = []
+    for turn_deg in (0.0, 30.0):
+        T = make_transform(Rotation.from_rotvec([0, np.radians(turn_deg), 0]).as_matrix(), [0.0, 0.0, 0.5])
+        segment = _one_segment()
+        segment.extra["sigma_direction_rad"] = np.array([np.radians(4.0)])
+        observed.append((kind.observe(segment, FrameContext(T, INTR)), T))
+    assert "view_normal" in observed[0][0].extra
+    one_aspect = kind.concatenate(kind.empty("gripper"), observed[0][0])
+    assert not set(OBSERVATION_ONLY) & set(one_aspect.extra)
+    for _ in range(3):
+        one_aspect = kind.merge(one_aspect, observed[0][0], np.array([0]), np.array([0]),
+                                FrameContext(observed[0][1], INTR))
+
+    def written(model_segments, observations):
+        return to_model(model_segments, np.array([0.95]), np.array([observations]),
+                        max_direction_sigma_deg=params.max_direction_sigma_deg,
+                        single_aspect_sigma_deg=params.single_aspect_sigma_deg)
+
+    model = written(one_aspect, 4)
+    sigma_deg = np.degrees(model.extra["sigma_direction_rad"][0])
+    assert params.single_aspect_sigma_deg < sigma_deg < params.max_direction_sigma_deg
+    assert model.confidence[0] == UNSURE_CONFIDENCE and not model.accepted[0]
+    two_aspects = kind.merge(one_aspect, observed[1][0], np.array([0]), np.array([0]),
+                             FrameContext(observed[1][1], INTR))
+    model = written(two_aspects, 5)
+    assert np.degrees(model.extra["sigma_direction_rad"][0]) < params.max_direction_sigma_deg
     assert model.confidence[0] == 0.95 and model.accepted[0]
