@@ -39,7 +39,8 @@ limits once, on the refinement of the first frame's given pose (``calibrated``).
 compares the candidate poses of a frame (``decide``): a verified pose whose coverage exceeds that of
 a distinct rival (a verified pose, or one the images show as well without pinning it, proposed by a
 search after a failure or as a symmetric twin) by less than ``min_margin`` is ``ambiguous`` and keeps the
-alternatives. Every estimate carries its
+alternatives, and the next frames refine from those poses too until one frame is tracked
+(``PoseTracker._carried``). Every estimate carries its
 figures and the standard deviations of its last Gauss-Newton step (``PoseEstimate.figures``).
 
 ``PoseTracker`` follows a sequence. It refines from both the constant-velocity
@@ -155,7 +156,8 @@ class PoseEstimate:
     distances (a point counts once per image where it found an edge); coverage: the share of
     the visible model's sample points within ``inlier_px`` of an edge in both images (the left and
     right projections of one 3D point, so with the disparity of the pose); status 'tracked',
-    'ambiguous' or 'lost'; how it was found ('refined', 'wide', 'restart', 'ransac', 'symmetry'); reason: why it is not
+    'ambiguous' or 'lost'; how it was found ('refined', 'wide', 'restart', 'ransac', 'symmetry',
+    'carried'); reason: why it is not
     'tracked' ('' when it is); margin: coverage minus that of the best distinct alternative pose
     (NaN until the tracker compares them); std_rotation_deg (3,), std_translation_mm (3,): standard
     deviations of the final Gauss-Newton step's increment (rotation about the visible model's
@@ -781,7 +783,8 @@ def decide(candidates: list[PoseEstimate], params: TrackParams = TrackParams()) 
     ``judge`` with ``rival_slack`` on the RMS, and half of it on the inlier share, whatever their
     standard deviations) and that neither the motion nor 3D support ``refuted``: every such one
     where the best was found searching after nothing verified ('wide', 'restart'), and such
-    symmetric twins ('symmetry') always. Found with the models of experiments not kept: a
+    symmetric twins ('symmetry') and refinements from the last ambiguous frame's poses ('carried')
+    always. Found with the models of experiments not kept: a
     re-acquisition slid 10.3 mm along a model's parallel edges verified at coverage 0.895 while its
     slid twins covered 0.85 and 0.91, failed only by standard deviations of 0.32 and 0.38 deg; a
     restart 6.4 deg off verified at 0.60 (RMS 0.55 px) where refinements 11 to 13 deg from the

@@ -372,6 +372,9 @@ def test_a_restart_must_beat_the_unverified_poses_too():
     wide = _estimate(T_FRONT, 0.60)
     wide.method = "wide"                       # found searching wider after nothing verified: as a restart
     assert decide([wide, _estimate(turned, 0.56, "lost")]).status == "ambiguous"
+    carried = _estimate(turned, 0.53, "lost")  # refined from a pose of the last ambiguous frame: as a twin
+    carried.method = "carried"
+    assert decide([_estimate(T_FRONT, 0.52), carried]).status == "ambiguous"
     # the best rival by coverage: a lost pose 1 deg from a verified rival covering less is not hidden by it
     restart = _estimate(T_FRONT, 0.60)
     restart.method = "restart"
