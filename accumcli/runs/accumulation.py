@@ -204,8 +204,12 @@ def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str,
     these passes average the stereo directions (``view_planes`` off): the planes trust the poses to
     half a degree, and these poses are not yet repaired (``make motion`` with view-plane models in
     every pass: worst shortfall 0.090 against 0.048; in pass 3 alone, median pose error 0.57 deg
-    against 0.53)."""
-    averaging = replace(params.line_model, view_planes=False)
+    against 0.53). They accept segments seen from one aspect by the 5-degree rule alone
+    (``single_aspect_sigma_deg`` off): they serve to place frames, where a segment of one aspect
+    still pins the pose, and the poses are not yet good enough for the one-aspect rule. With the
+    rule in these passes too: ``make motion`` 7 of 12 within 0.02 against 8, the real teabox's
+    completeness 0.624 against 0.697 (``benchmarks/suite.py --only teabox --motion tracked``)."""
+    averaging = replace(params.line_model, view_planes=False, single_aspect_sigma_deg=None)
 
     def accepted(extractions, pose_of) -> Segments:
         """The accepted segments of an accumulation, with the known motion, of (frame, extraction) pairs,
