@@ -208,7 +208,8 @@ def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str,
     (``single_aspect_sigma_deg`` off): they serve to place frames, where a segment of one aspect
     still pins the pose, and the poses are not yet good enough for the one-aspect rule. With the
     rule in these passes too: ``make motion`` 7 of 12 within 0.02 against 8, the real teabox's
-    completeness 0.624 against 0.697 (``benchmarks/suite.py --only teabox --motion tracked``)."""
+    completeness 0.624 against 0.697 (``benchmarks/suite.py --only teabox --motion tracked``; both
+    with the first, two-part form of ``metric``'s direction gate)."""
     averaging = replace(params.line_model, view_planes=False, single_aspect_sigma_deg=None)
 
     def accepted(extractions, pose_of) -> Segments:
