@@ -162,26 +162,16 @@ class LineSegmentType:
         """Pairs within the metric's thresholds, gated by both sides' own sigmas where they carry them
         (model segments and extracted ones alike; see ``sigmas``) and, for an observation made ready
         by ``observe``, by the direction gate by covariance (``metric``: its view plane against the
-        model segment's ``direction_covariance``), with each pair's widening."""
+        model segment's direction information ``dir_info``), with each pair's widening."""
         x = observed.extra
         plane = (x["view_normal"], x["view_sigma"]) if "view_normal" in x else None
-        covariance = self.direction_covariance(model) if plane is not None else None
+        information = None
+        if plane is not None and "dir_info" in model.extra:    # in 1/rad^2 (``observe``'s reference)
+            information = model.extra["dir_info"] / np.radians(self.params.reference_direction_sigma_deg) ** 2
         return candidate_pairs(model.centers, model.directions, model.lengths, observed.centers,
                                observed.directions, observed.lengths, self.params.thresholds,
                                sigmas_a=sigmas(model), sigmas_b=sigmas(observed), widening=True, plane_b=plane,
-                               cov_a=covariance)
-
-    def direction_covariance(self, model: Segments) -> np.ndarray | None:
-        """(N, 3, 3) covariance of the model segments' directions, rad^2, across each direction, from
-        ``dir_info`` (its two larger eigenvalues above the smallest, as ``merge`` pins the sigma; at
-        most a right angle in any sense); None without view planes (the gate then takes the
-        segment's sigma in every sense)."""
-        if "dir_info" not in model.extra:
-            return None
-        values, vectors = np.linalg.eigh(model.extra["dir_info"] / np.radians(
-            self.params.reference_direction_sigma_deg) ** 2)                  # ascending, 1/rad^2
-        variance = np.minimum(1.0 / np.maximum(values[:, 1:] - values[:, :1], 1e-12), (np.pi / 2) ** 2)
-        return np.einsum("nia,na,nja->nij", vectors[:, :, 1:], variance, vectors[:, :, 1:])
+                               info_a=information)
 
     def pair_cost(self, a: Segments, b: Segments) -> np.ndarray:
         ok, cost, _ = pair_costs(a.centers, a.directions, a.lengths, b.centers, b.directions, b.lengths,

@@ -44,7 +44,7 @@ segment) is what short pieces get wrong: on ``make suite``, single-frame pieces 
 than 10 degrees off it are off by a median of 1 degree in the image and the rest in depth. A model
 segment's direction is unsure in the same way until views from other aspects pin it: its direction
 information (``line_model``'s ``dir_info``) holds that. Where the second side b carries its view
-plane (``plane_b``: an observation) and a its direction covariance (``cov_a``, else its sigma in
+plane (``plane_b``: an observation) and a its direction information (``info_a``, else its sigma in
 every sense), the pair's direction difference, in the tangent plane of a's direction, is tested by
 its Mahalanobis distance under the sum of the two covariances plus (s_o / k)^2 (the paper's
 threshold as the floor, as above): at most k, and the angle at most ``max_angle_scale`` s_o (the
@@ -105,14 +105,15 @@ def pair_thresholds(thresholds: MetricThresholds, sigma_a, sigma_b, floor: float
 
 def candidate_pairs(centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b,
                     thresholds: MetricThresholds, neighbours: int = 6, sigmas_a=None, sigmas_b=None,
-                    widening: bool = False, plane_b=None, cov_a=None):
+                    widening: bool = False, plane_b=None, info_a=None):
     """The pairs (i in a, j in b) with d_o <= s_o and d_p <= s_p.
 
     ``sigmas_a`` / ``sigmas_b``: optional (position sigma (N,) m, direction sigma (N,) rad) of each
     side; given both, every pair is gated by its own thresholds (module docstring), else by
     (s_p, s_o). ``plane_b``: optional (view-plane normal (M, 3), unit, a zero row for none; its
-    sigma (M,) rad) of b's segments, and ``cov_a``: optional (N, 3, 3) direction covariances of a's
-    segments, rad^2, for the direction gate by covariance (module docstring; needs both sigmas).
+    sigma (M,) rad) of b's segments, and ``info_a``: optional (N, 3, 3) direction information of a's
+    segments, 1/rad^2 (its part across each direction counts), for the direction gate by covariance
+    (module docstring; needs both sigmas).
 
     A KD-tree on a's centres gives each segment of b its ``neighbours`` nearest
     centres within the distance that ``d_p <= s_p`` allows
@@ -144,7 +145,7 @@ def candidate_pairs(centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b,
         return empty
     ok, cost, wide = pair_costs(centers_a[i], dirs_a[i], lengths_a[i], centers_b[j], dirs_b[j], lengths_b[j],
                                 thresholds, _rows(sigmas_a, i), _rows(sigmas_b, j), _rows(plane_b, j),
-                                None if cov_a is None else cov_a[i])
+                                None if info_a is None else info_a[i])
     pairs = i[ok], j[ok], cost[ok]
     return pairs + (wide[ok],) if widening else pairs
 
@@ -154,7 +155,7 @@ def _rows(sigmas, index):
 
 
 def pair_costs(centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b, thresholds: MetricThresholds,
-               sigmas_a=None, sigmas_b=None, plane_b=None, cov_a=None):
+               sigmas_a=None, sigmas_b=None, plane_b=None, info_a=None):
     """Row by row (K rows): (ok (K,) bool, cost (K,), widening (K,)) of the pairs (a[k], b[k]), as
     ``candidate_pairs`` defines them (cost inf where not ok)."""
     s_p, nominal = thresholds.s_p, np.radians(thresholds.s_o_deg)
@@ -167,8 +168,8 @@ def pair_costs(centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b, thres
     dist = d_p(centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b, s_p)
     angle_cost = (angle / s_o) ** 2
     if gated and plane_b is not None:
-        by_covariance = direction_distance(dirs_a, dirs_b, _tangent_covariance(dirs_a, sigmas_a[1], cov_a),
-                                           plane_b, sigmas_b[1], nominal / thresholds.gate_sigmas)
+        by_covariance = direction_distance(dirs_a, sigmas_a[1], info_a, dirs_b, sigmas_b[1], plane_b,
+                                           nominal / thresholds.gate_sigmas)
         angle_cost = np.where(angle <= thresholds.max_angle_scale * nominal,
                               (by_covariance / thresholds.gate_sigmas) ** 2, np.inf)
         s_o = nominal
@@ -177,34 +178,48 @@ def pair_costs(centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b, thres
     return ok, cost, np.broadcast_to(s_p / thresholds.s_p * s_o / nominal, ok.shape)
 
 
-def _tangent_covariance(dirs, sigma, cov=None) -> np.ndarray:
-    """(K, 3, 3) direction covariances, rad^2: ``cov`` where given, else ``sigma`` (K,) in every sense
-    across the direction."""
-    if cov is not None:
-        return cov
-    return sigma[:, None, None] ** 2 * (np.eye(3) - dirs[:, :, None] * dirs[:, None, :])
+def _across(dirs, sigma) -> np.ndarray:
+    """(K, 3, 3) covariances ``sigma`` (K,) rad in every sense across unit directions (K, 3)."""
+    return sigma[:, None, None] ** 2 * (np.eye(3) - _outer(dirs))
 
 
-def direction_distance(dirs_a, dirs_b, cov_a, plane_b, sigma_b, floor) -> np.ndarray:
+def direction_distance(dirs_a, sigma_a, info_a, dirs_b, sigma_b, plane_b, floor) -> np.ndarray:
     """(K,) Mahalanobis distance of undirected unit directions b from a (K, 3), in the tangent plane of a,
-    under a's covariance ``cov_a`` (K, 3, 3) rad^2, b's (``sigma_b`` (K,) rad within its view plane
-    ``plane_b`` = (normal (K, 3), a zero row for none, sigma (K,)) and the plane's sigma across it;
-    ``sigma_b`` in every sense where it has no plane) and ``floor`` rad in every sense."""
+    under a's covariance (the inverse of ``info_a`` (K, 3, 3) 1/rad^2 across a, less its information
+    along a, as ``line_model.merge`` pins a sigma; at most about a right angle in any sense; without
+    ``info_a``, ``sigma_a`` (K,) rad in every sense), b's (``sigma_b`` (K,) rad within its view plane
+    ``plane_b`` = (normal (K, 3), a zero row for none; sigma (K,)) and the plane's sigma across it;
+    ``sigma_b`` in every sense where it has no plane) and ``floor`` rad in every sense. 2x2 algebra
+    throughout: no eigen-decomposition per pair."""
     normal, plane_sigma = plane_b
     has_plane = np.any(normal != 0, axis=1)
     within = np.cross(normal, dirs_b)
     within /= np.maximum(np.linalg.norm(within, axis=1, keepdims=True), 1e-12)
     cov_b = np.where(has_plane[:, None, None],
                      sigma_b[:, None, None] ** 2 * _outer(within) + plane_sigma[:, None, None] ** 2 * _outer(normal),
-                     _tangent_covariance(dirs_b, sigma_b))
+                     _across(dirs_b, sigma_b))
     helper = np.where(np.abs(dirs_a[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
     e1 = np.cross(dirs_a, helper)
     e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
     basis = np.stack([e1, np.cross(dirs_a, e1)], axis=2)                    # (K, 3, 2), across a
+    eye = np.eye(2)
+    if info_a is None:
+        cov = sigma_a[:, None, None] ** 2 * eye
+    else:
+        along = np.einsum("ki,kij,kj->k", dirs_a, info_a, dirs_a)
+        info = np.einsum("kia,kij,kjb->kab", basis, info_a, basis) - along[:, None, None] * eye + (2 / np.pi) ** 2 * eye
+        cov = _inverse_2x2(info)
+    cov = cov + np.einsum("kia,kij,kjb->kab", basis, cov_b, basis) + floor ** 2 * eye
     sign = np.where(np.sum(dirs_a * dirs_b, axis=1) >= 0, 1.0, -1.0)
     offset = np.einsum("kia,ki->ka", basis, dirs_b * sign[:, None])
-    cov = np.einsum("kia,kij,kjb->kab", basis, cov_a + cov_b, basis) + floor ** 2 * np.eye(2)
-    return np.sqrt(np.einsum("ka,kab,kb->k", offset, np.linalg.inv(cov), offset))
+    return np.sqrt(np.einsum("ka,kab,kb->k", offset, _inverse_2x2(cov), offset))
+
+
+def _inverse_2x2(m: np.ndarray) -> np.ndarray:
+    """(K, 2, 2) inverses of (K, 2, 2) matrices, in closed form."""
+    det = m[:, 0, 0] * m[:, 1, 1] - m[:, 0, 1] * m[:, 1, 0]
+    adjugate = np.stack([np.stack([m[:, 1, 1], -m[:, 0, 1]], 1), np.stack([-m[:, 1, 0], m[:, 0, 0]], 1)], 1)
+    return adjugate / det[:, None, None]
 
 
 def _outer(v: np.ndarray) -> np.ndarray:

@@ -124,18 +124,18 @@ def test_direction_gate_by_covariance_forgives_a_tilt_where_a_side_is_unsure_onl
     (normal y), its depth tilt is unsure (8 degrees). A model segment 12 degrees off it within that
     plane corresponds (no widening for it); the same 12 degrees out of the plane, or 16 within it
     (over the ceiling of 2 s_o), do not; without the plane the 12 degrees do not either. A model
-    segment unsure in one sense (its own covariance, 10 degrees towards z) takes a precise
+    segment unsure in one sense (its own information, 10 degrees towards z) takes a precise
     observation tilted that way, not one tilted across."""
     sigma_model = (np.array([0.0005]), np.array([np.radians(1.0)]))
     sigma_observed = (np.array([0.0005]), np.array([np.radians(8.0)]))
     plane = (np.array([[0.0, 1.0, 0.0]]), np.array([np.radians(0.5)]))
 
-    def paired(turn_axis, angle_deg, with_plane=True, sigmas_b=sigma_observed, plane_b=plane, cov_a=None):
+    def paired(turn_axis, angle_deg, with_plane=True, sigmas_b=sigma_observed, plane_b=plane, info_a=None):
         u = Rotation.from_rotvec(np.radians(angle_deg) * np.asarray(turn_axis, float)).apply(X)
         i, j, cost, wide = candidate_pairs(np.zeros((1, 3)), u[None], np.array([0.012]), np.zeros((1, 3)), X[None],
                                            np.array([0.012]), MetricThresholds(), sigmas_a=sigma_model,
                                            sigmas_b=sigmas_b, widening=True,
-                                           plane_b=plane_b if with_plane else None, cov_a=cov_a)
+                                           plane_b=plane_b if with_plane else None, info_a=info_a)
         return len(i) == 1 and wide[0] == 1.0
 
     assert paired([0, 1, 0], 12.0)                 # tilted in depth, within the view plane
@@ -145,7 +145,7 @@ def test_direction_gate_by_covariance_forgives_a_tilt_where_a_side_is_unsure_onl
     assert not paired([0, 1, 0], 12.0, with_plane=False)
     precise = (np.array([0.0005]), np.array([np.radians(1.0)]))
     no_plane = (np.zeros((1, 3)), np.zeros(1))
-    unsure_towards_z = (np.radians(10.0) ** 2 * np.outer([0, 0, 1.0], [0, 0, 1.0])
-                        + np.radians(0.5) ** 2 * np.outer(Y, Y))[None]
-    assert paired([0, 1, 0], 12.0, sigmas_b=precise, plane_b=no_plane, cov_a=unsure_towards_z)
-    assert not paired([0, 0, 1], 12.0, sigmas_b=precise, plane_b=no_plane, cov_a=unsure_towards_z)
+    unsure_towards_z = (np.radians(10.0) ** -2 * np.outer([0, 0, 1.0], [0, 0, 1.0])
+                        + np.radians(0.5) ** -2 * np.outer(Y, Y))[None]      # information, 1/rad^2
+    assert paired([0, 1, 0], 12.0, sigmas_b=precise, plane_b=no_plane, info_a=unsure_towards_z)
+    assert not paired([0, 0, 1], 12.0, sigmas_b=precise, plane_b=no_plane, info_a=unsure_towards_z)
