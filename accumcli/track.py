@@ -1077,11 +1077,11 @@ class PoseTracker:
 
     def _carried(self, candidates: list[PoseEstimate], frame: StereoFrame, grads) -> list[PoseEstimate]:
         """Refinements from the poses of the last 'ambiguous' frame that no candidate is near yet:
-        an ambiguity carries over until a frame tells its poses apart (each a verified rival for
-        ``decide``). Why: a frame after an ambiguous one starts from the tracked frames before it,
-        and on the tracking scoreboard (sim_206, one aspect of a model) it verified a pose 2.5 deg
-        and 7 mm off at a coverage of 0.52 while the alternative it had been confused with was not
-        looked at again."""
+        an ambiguity carries over until a frame tells its poses apart (each a rival in ``decide`` if
+        it verifies or the images show it about as well). Why: a frame after an ambiguous one starts
+        from the tracked frames before it, and on the tracking scoreboard (sim_206, one aspect of a
+        model) it verified a pose 2.5 deg and 7 mm off at a coverage of 0.52 while the alternative it
+        had been confused with was not looked at again."""
         p = self.params
         out = []
         for T in self._undecided:
