@@ -167,11 +167,13 @@ def pair_costs(centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b, thres
         s_p = pair_thresholds(thresholds, sigmas_a[0], sigmas_b[0], s_p, thresholds.max_scale)
     dist = d_p(centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b, s_p)
     angle_cost = (angle / s_o) ** 2
-    if gated and plane_b is not None:
-        by_covariance = direction_distance(dirs_a, sigmas_a[1], info_a, dirs_b, sigmas_b[1], plane_b,
-                                           nominal / thresholds.gate_sigmas)
-        angle_cost = np.where(angle <= thresholds.max_angle_scale * nominal,
-                              (by_covariance / thresholds.gate_sigmas) ** 2, np.inf)
+    if gated and plane_b is not None:    # only where the position and the ceiling let a pair through
+        angle_cost = np.full(len(angle), np.inf)
+        rows = np.flatnonzero((dist <= s_p) & (angle <= thresholds.max_angle_scale * nominal))
+        by_covariance = direction_distance(
+            dirs_a[rows], sigmas_a[1][rows], None if info_a is None else info_a[rows], dirs_b[rows],
+            sigmas_b[1][rows], (plane_b[0][rows], plane_b[1][rows]), nominal / thresholds.gate_sigmas)
+        angle_cost[rows] = (by_covariance / thresholds.gate_sigmas) ** 2
         s_o = nominal
     ok = (angle_cost <= 1.0) & (dist <= s_p)
     cost = np.where(ok, (dist / s_p) ** 2 + angle_cost, np.inf)
