@@ -146,3 +146,8 @@ def mean_transform(Ts: np.ndarray) -> np.ndarray:
 def unit(vectors: np.ndarray) -> np.ndarray:
     """Rows of ``vectors: (N, 3)`` scaled to unit length."""
     return vectors / np.linalg.norm(vectors, axis=-1, keepdims=True)
+
+
+def outer(vectors: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) outer products v v^T of the rows of ``vectors: (N, 3)``."""
+    return vectors[:, :, None] * vectors[:, None, :]

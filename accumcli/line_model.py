@@ -78,7 +78,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .geometry import check_points, check_transform, invert, transform_points
+from .geometry import check_points, check_transform, invert, outer, transform_points
 from .metric import MetricThresholds, candidate_pairs, d_o, d_p, pair_costs
 from .recording import StereoIntrinsics
 from .segments import Segments, concatenate
@@ -242,7 +242,7 @@ class LineSegmentType:
             sigma_plane = np.hypot(line_sigma, np.radians(p.pose_rotation_sigma_deg))
             plane_weight = np.where(sine >= p.min_plane_sine, w * (reference / sigma_plane) ** 2, 0.0)
             out.extra["dir_info"] = direction_weight[:, None, None] * across + \
-                plane_weight[:, None, None] * _outer(normal)
+                plane_weight[:, None, None] * outer(normal)
             # the observation's own view plane, for the direction gate by covariance (``correspondences``)
             out.extra["view_normal"] = np.where((sine >= p.min_plane_sine)[:, None], normal, 0.0)
             out.extra["view_sigma"] = sigma_plane
@@ -352,11 +352,6 @@ def _add_view(views: np.ndarray, new: np.ndarray, step: float) -> np.ndarray:
     rows = np.flatnonzero(novel)
     views[rows, slot[rows]] = new[rows]
     return views
-
-
-def _outer(v: np.ndarray) -> np.ndarray:
-    """(N, 3, 3) v v^T of (N, 3) vectors."""
-    return v[:, :, None] * v[:, None, :]
 
 
 def _unit(v: np.ndarray) -> np.ndarray:

@@ -67,6 +67,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .geometry import outer, unit
+
 
 @dataclass(frozen=True)
 class MetricThresholds:
@@ -182,7 +184,7 @@ def pair_costs(centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b, thres
 
 def _across(dirs, sigma) -> np.ndarray:
     """(K, 3, 3) covariances ``sigma`` (K,) rad in every sense across unit directions (K, 3)."""
-    return sigma[:, None, None] ** 2 * (np.eye(3) - _outer(dirs))
+    return sigma[:, None, None] ** 2 * (np.eye(3) - outer(dirs))
 
 
 def direction_distance(dirs_a, sigma_a, info_a, dirs_b, sigma_b, plane_b, floor) -> np.ndarray:
@@ -198,11 +200,10 @@ def direction_distance(dirs_a, sigma_a, info_a, dirs_b, sigma_b, plane_b, floor)
     within = np.cross(normal, dirs_b)
     within /= np.maximum(np.linalg.norm(within, axis=1, keepdims=True), 1e-12)
     cov_b = np.where(has_plane[:, None, None],
-                     sigma_b[:, None, None] ** 2 * _outer(within) + plane_sigma[:, None, None] ** 2 * _outer(normal),
+                     sigma_b[:, None, None] ** 2 * outer(within) + plane_sigma[:, None, None] ** 2 * outer(normal),
                      _across(dirs_b, sigma_b))
     helper = np.where(np.abs(dirs_a[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    e1 = np.cross(dirs_a, helper)
-    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    e1 = unit(np.cross(dirs_a, helper))
     basis = np.stack([e1, np.cross(dirs_a, e1)], axis=2)                    # (K, 3, 2), across a
     eye = np.eye(2)
     if info_a is None:
@@ -222,7 +223,3 @@ def _inverse_2x2(m: np.ndarray) -> np.ndarray:
     det = m[:, 0, 0] * m[:, 1, 1] - m[:, 0, 1] * m[:, 1, 0]
     adjugate = np.stack([np.stack([m[:, 1, 1], -m[:, 0, 1]], 1), np.stack([-m[:, 1, 0], m[:, 0, 0]], 1)], 1)
     return adjugate / det[:, None, None]
-
-
-def _outer(v: np.ndarray) -> np.ndarray:
-    return v[:, :, None] * v[:, None, :]

@@ -106,13 +106,18 @@ class LineAccumulation:
         log.debug("frame %d: %s", frame.index, ", ".join(f"{k} {v}" for k, v in stats.__dict__.items()))
         return AccumulationStep(frame, extraction, T_camera_object, stats, estimate)
 
+    def _written(self, uncertainty: bool = True) -> Segments:
+        """The core's segments as ``to_model`` writes them, with this run's acceptance rules."""
+        lm = self.params.line_model
+        return to_model(self.core.entities, self.core.confidence, self.core.observations, uncertainty=uncertainty,
+                        max_direction_sigma_deg=lm.max_direction_sigma_deg,
+                        single_aspect_sigma_deg=lm.single_aspect_sigma_deg)
+
     def _refined(self, frame: StereoFrame, T_recorded: np.ndarray,
                  extraction: FrameSegments) -> tuple[np.ndarray, PoseEstimate | None]:
         p = self.params
         track = p.track
-        model = to_model(self.core.entities, self.core.confidence, self.core.observations, uncertainty=False,
-                         max_direction_sigma_deg=self.params.line_model.max_direction_sigma_deg,
-                         single_aspect_sigma_deg=self.params.line_model.single_aspect_sigma_deg)
+        model = self._written(uncertainty=False)
         if model.accepted.sum() < p.min_tracking_segments:
             # bootstrap: until enough segments are accepted, refine against the tentative ones too
             # (the background among them does not follow the object and falls to the robust weights;
@@ -134,9 +139,7 @@ class LineAccumulation:
     def model(self) -> Segments:
         """The current model: every live segment with its confidence and observation count (with
         tracked motion, moved into the object frame by the mean offset; see the class docstring)."""
-        model = to_model(self.core.entities, self.core.confidence, self.core.observations,
-                         max_direction_sigma_deg=self.params.line_model.max_direction_sigma_deg,
-                         single_aspect_sigma_deg=self.params.line_model.single_aspect_sigma_deg)
+        model = self._written()
         if not self.T_recorded_model:
             return model
         T_object_model = mean_transform(np.stack(self.T_recorded_model))

@@ -303,6 +303,18 @@ def test_association_of_an_uncertain_far_segment_and_a_precise_near_one():
     assert abs(sigmas(merged)[0][0] - 0.0033 / np.sqrt(2)) < 1e-9
 
 
+def _observed_from_two_aspects(kind: LineSegmentType, sigma_deg: float, turn_deg: float) -> list:
+    """[(observation, T_camera_object)] of ``_one_segment`` claiming a direction sigma of ``sigma_deg``,
+    seen from the front and from a camera turned ``turn_deg`` about the y axis."""
+    observed = []
+    for turn in (0.0, turn_deg):
+        T = make_transform(Rotation.from_rotvec([0, np.radians(turn), 0]).as_matrix(), [0.0, 0.0, 0.5])
+        segment = _one_segment()
+        segment.extra["sigma_direction_rad"] = np.array([np.radians(sigma_deg)])
+        observed.append((kind.observe(segment, FrameContext(T, INTR)), T))
+    return observed
+
+
 def test_a_confirmed_segment_whose_direction_is_unsure_is_not_accepted_until_another_aspect_pins_it():
     """A piece alone on its stretch near the epipolar direction carries a direction sigma of 15
     degrees: however often one view confirms it, the model does not accept it (confidence written
@@ -310,12 +322,7 @@ def test_a_confirmed_segment_whose_direction_is_unsure_is_not_accepted_until_ano
     and it is accepted."""
     kind = LineSegmentType()
     limit = LineModelParams().max_direction_sigma_deg
-    observed = []
-    for turn_deg in (0.0, 40.0):
-        T = make_transform(Rotation.from_rotvec([0, np.radians(turn_deg), 0]).as_matrix(), [0.0, 0.0, 0.5])
-        segment = _one_segment()
-        segment.extra["sigma_direction_rad"] = np.array([np.radians(15.0)])
-        observed.append((kind.observe(segment, FrameContext(T, INTR)), T))
+    observed = _observed_from_two_aspects(kind, 15.0, 40.0)
     one_aspect = observed[0][0]
     for _ in range(3):
         one_aspect = kind.merge(one_aspect, observed[0][0], np.array([0]), np.array([0]),
@@ -338,12 +345,7 @@ def test_a_segment_seen_from_one_aspect_must_be_surer_of_its_direction():
     one-aspect limit, and it is accepted. The observations' own view planes stay out of the model."""
     params = LineModelParams()
     kind = LineSegmentType(params)
-    observed = []
-    for turn_deg in (0.0, 30.0):
-        T = make_transform(Rotation.from_rotvec([0, np.radians(turn_deg), 0]).as_matrix(), [0.0, 0.0, 0.5])
-        segment = _one_segment()
-        segment.extra["sigma_direction_rad"] = np.array([np.radians(4.0)])
-        observed.append((kind.observe(segment, FrameContext(T, INTR)), T))
+    observed = _observed_from_two_aspects(kind, 4.0, 30.0)
     assert "view_normal" in observed[0][0].extra
     one_aspect = kind.concatenate(kind.empty("gripper"), observed[0][0])
     assert not set(OBSERVATION_ONLY) & set(one_aspect.extra)
