@@ -102,7 +102,7 @@ class LineAccumulation:
         # accepted as the model is written (``to_model``: a segment's direction must be sure too)
         lm = self.params.line_model
         stats.accepted = int(np.sum((self.core.log_odds >= 0) & direction_known(
-            self.core.entities, lm.max_direction_sigma_deg, lm.single_aspect_sigma_deg)))
+            self.core.entities, lm.max_direction_sigma_deg, lm.single_aspect_sigma_deg, lm.single_aspect_span_deg)))
         log.debug("frame %d: %s", frame.index, ", ".join(f"{k} {v}" for k, v in stats.__dict__.items()))
         return AccumulationStep(frame, extraction, T_camera_object, stats, estimate)
 
@@ -111,7 +111,8 @@ class LineAccumulation:
         lm = self.params.line_model
         return to_model(self.core.entities, self.core.confidence, self.core.observations, uncertainty=uncertainty,
                         max_direction_sigma_deg=lm.max_direction_sigma_deg,
-                        single_aspect_sigma_deg=lm.single_aspect_sigma_deg)
+                        single_aspect_sigma_deg=lm.single_aspect_sigma_deg,
+                        single_aspect_span_deg=lm.single_aspect_span_deg)
 
     def _refined(self, frame: StereoFrame, T_recorded: np.ndarray,
                  extraction: FrameSegments) -> tuple[np.ndarray, PoseEstimate | None]:

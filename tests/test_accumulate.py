@@ -17,6 +17,7 @@ from accumcli.line_model import (
     FrameContext,
     LineModelParams,
     LineSegmentType,
+    direction_known,
     sigmas,
     to_model,
 )
@@ -356,7 +357,8 @@ def test_a_segment_seen_from_one_aspect_must_be_surer_of_its_direction():
     def written(model_segments, observations):
         return to_model(model_segments, np.array([0.95]), np.array([observations]),
                         max_direction_sigma_deg=params.max_direction_sigma_deg,
-                        single_aspect_sigma_deg=params.single_aspect_sigma_deg)
+                        single_aspect_sigma_deg=params.single_aspect_sigma_deg,
+                        single_aspect_span_deg=params.single_aspect_span_deg)
 
     model = written(one_aspect, 4)
     sigma_deg = np.degrees(model.extra["sigma_direction_rad"][0])
@@ -367,3 +369,18 @@ def test_a_segment_seen_from_one_aspect_must_be_surer_of_its_direction():
     model = written(two_aspects, 5)
     assert np.degrees(model.extra["sigma_direction_rad"][0]) < params.max_direction_sigma_deg
     assert model.confidence[0] == 0.95 and model.accepted[0]
+
+
+def test_views_within_the_aspect_span_count_as_one_aspect():
+    """Three segments claiming a 2-degree direction sigma, seen from one view, from two views 12
+    degrees apart and from two views 20 degrees apart: with a span of 15 degrees only the last is
+    known (the first two are one aspect, held to 1.5 degrees); with a span of 0, one stored view is one aspect."""
+    views = np.zeros((3, 6, 3), np.float32)
+    views[:, 0] = [0, 0, 1]
+    for row, degrees in ((1, 12.0), (2, 20.0)):
+        views[row, 1] = [np.sin(np.radians(degrees)), 0, np.cos(np.radians(degrees))]
+    segments = Segments("gripper", np.zeros((3, 3)), np.tile([1.0, 0, 0], (3, 1)), np.full(3, 0.02), np.ones(3),
+                        np.full(3, 4), {"views": views, "inv_var_direction": np.full(3, np.radians(2.0) ** -2)})
+    assert direction_known(segments, 5.0, 1.5, 15.0).tolist() == [False, False, True]
+    assert direction_known(segments, 5.0, 1.5, 0.0).tolist() == [False, True, True]
+    assert direction_known(segments, 5.0, None, 15.0).all()

@@ -296,6 +296,30 @@ def test_a_model_with_no_segment_in_view_is_lost_with_a_reason():
                                                      "re-acquisition: the model has 0 accepted segments (needs 4)")
 
 
+def test_a_reacquired_pose_must_cover_more_of_the_model_than_a_tracked_one(noisy_pair, model_of_exact):
+    """No motion corroborates a re-acquisition: it needs ``reacquire_min_coverage``, a refinement from
+    a recent tracked pose only ``min_coverage``. With the first between them, the same pose is lost
+    when re-acquired and tracked when followed."""
+    exact, _ = noisy_pair
+    with Recording(exact) as rec:
+        frame = next(iter(rec.frames(0, 1)))
+
+    def observe():
+        return extract_frame(frame).segments
+
+    found = PoseTracker(model_of_exact).update(frame, None, observe)       # no tracked frame: re-acquire
+    assert found.status == "tracked" and found.method in ("ransac", "symmetry")
+    rotation_deg, translation = pose_error(found.T_camera_object, frame.T_camera_object)
+    assert rotation_deg < 0.5 and translation < 0.002
+    stricter = TrackParams(min_coverage=found.coverage - 0.1, reacquire_min_coverage=found.coverage + 0.02)
+    lost = PoseTracker(model_of_exact, stricter).update(frame, None, observe)
+    assert lost.status == "lost" and not np.isfinite(lost.T_camera_object).any()
+    assert re.search(r"re-acquired: coverage 0\.\d\d in both images \(needs 0\.\d+\)", lost.reason), lost.reason
+    recent = [(frame.timestamp_ns - 10**8, found.T_camera_object)]          # tracked 0.1 s ago
+    followed = PoseTracker(model_of_exact, stricter, history=recent).update(frame, None, observe)
+    assert followed.status == "tracked" and followed.method == "refined"
+
+
 def test_tracker_uses_the_gradients_it_is_given(noisy_pair, model_of_exact):
     from accumcli.lines2d import Gradients, LineParams, frame_gradients
 
