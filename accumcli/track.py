@@ -118,9 +118,9 @@ class TrackParams:
     reacquire_search_px: tuple = (64.0, 40.0, 24.0, 12.0, 6.0, 3.0)
     max_gap_s: float = 0.5                   # longer gaps between tracked frames: re-acquire
     min_support_fraction: float = 0.2        # of visible model segments with a 3D counterpart, on re-acquisition
-    reacquire_std_ratio: float = 2 / 3       # a re-acquired pose's standard deviations: this share of max_std_*
+    reacquire_std_ratio: float = 2 / 3       # a re-acquired pose's standard deviations: this share of max_std_*,
+    reacquire_min_coverage: float = 0.6      # and its coverage at least this (``update``)
     ransac_hypotheses: int = 5               # distinct RANSAC poses refined on the images
-    reacquire_min_coverage: float = 0.6      # ... and its coverage at least this (``update``)
     reacquire_tukey_px: tuple = (32.0, 20.0, 12.0, 6.0, 4.0, 2.5)
     blur_sigma: float = 1.0                  # of the images before their gradients, px
     fine_start_px: float = 12.0              # a start that covers min_coverage skips the wider levels
