@@ -375,32 +375,35 @@ def _view_span(views: np.ndarray) -> np.ndarray:
 UNSURE_CONFIDENCE = 0.49   # the written confidence of a segment held back by its direction's sigma
 
 
-def direction_known(entities: Segments, max_sigma_deg: float | None,
-                    single_aspect_sigma_deg: float | None = None, single_aspect_span_deg: float = 0.0) -> np.ndarray:
+def direction_known(entities: Segments, rules: LineModelParams | None) -> np.ndarray:
     """(N,) bool: model segments whose direction sigma (``inv_var_direction``) is at most
-    ``max_sigma_deg`` (every one for None), and at most ``single_aspect_sigma_deg`` for those
-    confirmed from one aspect only: their stored views all within ``single_aspect_span_deg`` of
-    each other (0: one stored view; ``to_model`` says why)."""
-    if max_sigma_deg is None:
+    ``rules.max_direction_sigma_deg`` (every one for None, or without ``rules``), and at most
+    ``rules.single_aspect_sigma_deg`` (None: no such rule) for those confirmed from one aspect only:
+    their stored views all within ``rules.single_aspect_span_deg`` of each other (0: one stored
+    view; ``to_model`` says why). The views' span is measured only where the one-aspect rule can
+    decide (sigma between the two limits): it runs at every accumulation step."""
+    if rules is None or rules.max_direction_sigma_deg is None:
         return np.ones(len(entities), bool)
-    limit = np.radians(max_sigma_deg)
-    if single_aspect_sigma_deg is not None:
-        one_aspect = _view_span(entities.extra["views"]) <= np.radians(single_aspect_span_deg) + 1e-9
-        limit = np.where(one_aspect, np.radians(min(single_aspect_sigma_deg, max_sigma_deg)), limit)
-    return entities.extra["inv_var_direction"] >= limit ** -2.0
+    inverse_variance = entities.extra["inv_var_direction"]
+    known = inverse_variance >= np.radians(rules.max_direction_sigma_deg) ** -2.0
+    if rules.single_aspect_sigma_deg is not None:
+        undecided = np.flatnonzero(known & (inverse_variance < np.radians(rules.single_aspect_sigma_deg) ** -2.0))
+        known[undecided] = (_view_span(entities.extra["views"][undecided])
+                            > np.radians(rules.single_aspect_span_deg) + 1e-9)
+    return known
 
 
 def to_model(entities: Segments, confidence: np.ndarray, observations: np.ndarray,
-             uncertainty: bool = True, max_direction_sigma_deg: float | None = None,
-             single_aspect_sigma_deg: float | None = None, single_aspect_span_deg: float = 0.0) -> Segments:
+             uncertainty: bool = True, rules: LineModelParams | None = None) -> Segments:
     """The model as written to files: segments with confidence and observation count, and
     per segment its mean viewing direction, cone half-angle (degrees), direction sigma (rad) and
     (unless ``uncertainty`` is False: it inverts every segment's information, which tracking during
     accumulation does not need) the standard deviation of its position across its direction (m).
 
-    A segment whose direction sigma exceeds ``max_direction_sigma_deg`` is not accepted, whatever
-    its confidence (written at most ``UNSURE_CONFIDENCE``): its existence is confirmed, its line is
-    not. Such segments are seen from one aspect by pieces alone on their stretch, whose direction
+    ``rules`` (the run's ``LineModelParams``; None: none) decide which directions are sure enough
+    (``direction_known``). A segment whose direction sigma exceeds ``max_direction_sigma_deg`` is
+    not accepted, whatever its confidence (written at most ``UNSURE_CONFIDENCE``): its existence is
+    confirmed, its line is not. Such segments are seen from one aspect by pieces alone on their stretch, whose direction
     stereo leaves unsure (``stereo``: 1 degree over the sine of their planes' angle); more aspects
     or a fitted stretch pin it. 5 degrees keeps the direction's two sigmas within the 10 degrees
     by which a segment counts as correct. ``make suite`` against none: precision median 0.944 ->
@@ -436,7 +439,7 @@ def to_model(entities: Segments, confidence: np.ndarray, observations: np.ndarra
     0.612 / 0.646. Storing views 15 degrees apart instead gave 0.976 / 0.590 but moved the aspect
     cones that tracking relies on (false tracked frames on the tracking scoreboard)."""
     extra = entities.extra
-    known = direction_known(entities, max_direction_sigma_deg, single_aspect_sigma_deg, single_aspect_span_deg)
+    known = direction_known(entities, rules)
     confidence = np.where(known, confidence, np.minimum(confidence, UNSURE_CONFIDENCE))
     views = extra["views"]
     mean_view = _unit(views.sum(axis=1))

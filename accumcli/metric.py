@@ -161,22 +161,23 @@ def pair_costs(centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b, thres
     """Row by row (K rows): (ok (K,) bool, cost (K,), widening (K,)) of the pairs (a[k], b[k]), as
     ``candidate_pairs`` defines them (cost inf where not ok)."""
     s_p, nominal = thresholds.s_p, np.radians(thresholds.s_o_deg)
-    s_o = nominal
+    s_o = nominal         # the angle's threshold; by covariance the widening counts the position only
     angle = d_o(dirs_a, dirs_b)
     gated = sigmas_a is not None and sigmas_b is not None
+    by_covariance = gated and plane_b is not None
     if gated:
-        s_o = pair_thresholds(thresholds, sigmas_a[1], sigmas_b[1], s_o, thresholds.max_scale_direction)
         s_p = pair_thresholds(thresholds, sigmas_a[0], sigmas_b[0], s_p, thresholds.max_scale)
+        if not by_covariance:
+            s_o = pair_thresholds(thresholds, sigmas_a[1], sigmas_b[1], s_o, thresholds.max_scale_direction)
     dist = d_p(centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b, s_p)
     angle_cost = (angle / s_o) ** 2
-    if gated and plane_b is not None:    # only where the position and the ceiling let a pair through
+    if by_covariance:    # only where the position and the ceiling let a pair through
         angle_cost = np.full(len(angle), np.inf)
         rows = np.flatnonzero((dist <= s_p) & (angle <= thresholds.max_angle_scale * nominal))
-        by_covariance = direction_distance(
+        distance = direction_distance(
             dirs_a[rows], sigmas_a[1][rows], None if info_a is None else info_a[rows], dirs_b[rows],
             sigmas_b[1][rows], (plane_b[0][rows], plane_b[1][rows]), nominal / thresholds.gate_sigmas)
-        angle_cost[rows] = (by_covariance / thresholds.gate_sigmas) ** 2
-        s_o = nominal
+        angle_cost[rows] = (distance / thresholds.gate_sigmas) ** 2
     ok = (angle_cost <= 1.0) & (dist <= s_p)
     cost = np.where(ok, (dist / s_p) ** 2 + angle_cost, np.inf)
     return ok, cost, np.broadcast_to(s_p / thresholds.s_p * s_o / nominal, ok.shape)

@@ -100,19 +100,15 @@ class LineAccumulation:
         context = FrameContext(T_camera_object, frame.intrinsics, frame.border_distance)
         stats = self.core.update(extraction.segments, invert(T_camera_object), context)
         # accepted as the model is written (``to_model``: a segment's direction must be sure too)
-        lm = self.params.line_model
-        stats.accepted = int(np.sum((self.core.log_odds >= 0) & direction_known(
-            self.core.entities, lm.max_direction_sigma_deg, lm.single_aspect_sigma_deg, lm.single_aspect_span_deg)))
+        stats.accepted = int(np.sum((self.core.log_odds >= 0) & direction_known(self.core.entities,
+                                                                                self.params.line_model)))
         log.debug("frame %d: %s", frame.index, ", ".join(f"{k} {v}" for k, v in stats.__dict__.items()))
         return AccumulationStep(frame, extraction, T_camera_object, stats, estimate)
 
     def _written(self, uncertainty: bool = True) -> Segments:
         """The core's segments as ``to_model`` writes them, with this run's acceptance rules."""
-        lm = self.params.line_model
         return to_model(self.core.entities, self.core.confidence, self.core.observations, uncertainty=uncertainty,
-                        max_direction_sigma_deg=lm.max_direction_sigma_deg,
-                        single_aspect_sigma_deg=lm.single_aspect_sigma_deg,
-                        single_aspect_span_deg=lm.single_aspect_span_deg)
+                        rules=self.params.line_model)
 
     def _refined(self, frame: StereoFrame, T_recorded: np.ndarray,
                  extraction: FrameSegments) -> tuple[np.ndarray, PoseEstimate | None]:

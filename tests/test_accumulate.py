@@ -328,13 +328,14 @@ def test_a_confirmed_segment_whose_direction_is_unsure_is_not_accepted_until_ano
     for _ in range(3):
         one_aspect = kind.merge(one_aspect, observed[0][0], np.array([0]), np.array([0]),
                                 FrameContext(observed[0][1], INTR))
-    model = to_model(one_aspect, np.array([0.95]), np.array([4]), max_direction_sigma_deg=limit)
+    rules = LineModelParams(max_direction_sigma_deg=limit, single_aspect_sigma_deg=None)
+    model = to_model(one_aspect, np.array([0.95]), np.array([4]), rules=rules)
     assert np.degrees(model.extra["sigma_direction_rad"][0]) > limit
     assert model.confidence[0] == UNSURE_CONFIDENCE and not model.accepted[0]
-    assert to_model(one_aspect, np.array([0.95]), np.array([4]), max_direction_sigma_deg=None).accepted[0]
+    assert to_model(one_aspect, np.array([0.95]), np.array([4]), rules=None).accepted[0]
     two_aspects = kind.merge(one_aspect, observed[1][0], np.array([0]), np.array([0]),
                              FrameContext(observed[1][1], INTR))
-    model = to_model(two_aspects, np.array([0.95]), np.array([5]), max_direction_sigma_deg=limit)
+    model = to_model(two_aspects, np.array([0.95]), np.array([5]), rules=rules)
     assert np.degrees(model.extra["sigma_direction_rad"][0]) < limit
     assert model.confidence[0] == 0.95 and model.accepted[0]
 
@@ -355,10 +356,7 @@ def test_a_segment_seen_from_one_aspect_must_be_surer_of_its_direction():
                                 FrameContext(observed[0][1], INTR))
 
     def written(model_segments, observations):
-        return to_model(model_segments, np.array([0.95]), np.array([observations]),
-                        max_direction_sigma_deg=params.max_direction_sigma_deg,
-                        single_aspect_sigma_deg=params.single_aspect_sigma_deg,
-                        single_aspect_span_deg=params.single_aspect_span_deg)
+        return to_model(model_segments, np.array([0.95]), np.array([observations]), rules=params)
 
     model = written(one_aspect, 4)
     sigma_deg = np.degrees(model.extra["sigma_direction_rad"][0])
@@ -381,6 +379,10 @@ def test_views_within_the_aspect_span_count_as_one_aspect():
         views[row, 1] = [np.sin(np.radians(degrees)), 0, np.cos(np.radians(degrees))]
     segments = Segments("gripper", np.zeros((3, 3)), np.tile([1.0, 0, 0], (3, 1)), np.full(3, 0.02), np.ones(3),
                         np.full(3, 4), {"views": views, "inv_var_direction": np.full(3, np.radians(2.0) ** -2)})
-    assert direction_known(segments, 5.0, 1.5, 15.0).tolist() == [False, False, True]
-    assert direction_known(segments, 5.0, 1.5, 0.0).tolist() == [False, True, True]
-    assert direction_known(segments, 5.0, None, 15.0).all()
+    def rules(single_aspect_sigma_deg, span_deg):
+        return LineModelParams(max_direction_sigma_deg=5.0, single_aspect_sigma_deg=single_aspect_sigma_deg,
+                               single_aspect_span_deg=span_deg)
+
+    assert direction_known(segments, rules(1.5, 15.0)).tolist() == [False, False, True]
+    assert direction_known(segments, rules(1.5, 0.0)).tolist() == [False, True, True]
+    assert direction_known(segments, rules(None, 15.0)).all()

@@ -143,7 +143,7 @@ def test_direction_gate_by_covariance_forgives_a_tilt_where_a_side_is_unsure_onl
     assert paired([0, 0, 1], 6.0)                  # out of the plane within the paper's 7 degrees
     assert not paired([0, 1, 0], 16.0)             # within the plane, but over 2 x 7 degrees
     assert not paired([0, 1, 0], 12.0, with_plane=False)
-    precise = (np.array([0.0005]), np.array([np.radians(1.0)]))
+    precise = sigma_model
     no_plane = (np.zeros((1, 3)), np.zeros(1))
     unsure_towards_z = (np.radians(10.0) ** -2 * np.outer([0, 0, 1.0], [0, 0, 1.0])
                         + np.radians(0.5) ** -2 * np.outer(Y, Y))[None]      # information, 1/rad^2
