@@ -211,10 +211,11 @@ class _Output:
 class OutputSet:
     """Temporary files for all outputs of a run, renamed onto their targets together on success."""
 
-    def __init__(self, paths: Iterable):
+    def __init__(self, paths: Iterable, inputs: Iterable = ()):
         """Check every output now (raises AccumError with one line): a file name, not a folder,
-        not given twice, short enough for its folder, in an existing folder that takes a new file.
-        None entries (outputs not asked for) are skipped."""
+        not given twice, not one of the run's ``inputs`` (which it would replace before they are
+        read, or while they are), short enough for its folder, in an existing folder that takes a
+        new file. None entries (outputs not asked for, inputs not given) are skipped."""
         self._outputs: dict[str, _Output] = {}
         self._done = False
         for path in paths:
@@ -227,6 +228,13 @@ class OutputSet:
         targets = [os.path.abspath(o.target) for o in self._outputs.values()]
         if len(set(targets)) < len(targets):
             raise AccumError(f"two outputs are the same file ({', '.join(self._outputs)}); give each output once")
+        for source in inputs:
+            if source is None or source == "" or not os.path.exists(source):
+                continue
+            for out in self._outputs.values():
+                if os.path.exists(out.target) and os.path.samefile(source, out.target):
+                    raise AccumError(f"{out.given}: is also an input of this run ({os.fspath(source)}); "
+                                     "write the output to another file")
 
     @property
     def paths(self) -> list[str]:

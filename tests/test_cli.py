@@ -170,6 +170,19 @@ def test_quiet_and_verbose_go_before_or_after_the_command(small_recording, tmp_p
     assert quiet.exit_code == 0 and "calibration message" not in quiet.output
 
 
+@pytest.mark.parametrize("command", [["extract"], ["accumulate"], ["view", "--png", "{input}"]], ids=lambda c: c[0])
+def test_an_output_never_replaces_an_input(small_recording, tmp_path, command):
+    import shutil
+
+    recording = tmp_path / "run.mcap"
+    shutil.copy(small_recording, recording)
+    before = recording.read_bytes()
+    args = [a.replace("{input}", str(recording)) for a in command[1:]] or ["-o", recording]
+    result = run(command[0], recording, *args)
+    assert result.exit_code == 1 and "is also an input of this run" in result.output.strip().splitlines()[-1]
+    assert recording.read_bytes() == before
+
+
 def test_eval_refuses_the_truth_of_another_object(small_recording, tmp_path):
     import json
 

@@ -85,6 +85,17 @@ def test_given_twice(tmp_path):
         OutputSet([tmp_path / "real.json", tmp_path / "link.json"])
 
 
+def test_an_input_is_never_an_output(tmp_path):
+    recording = tmp_path / "run.mcap"
+    recording.write_bytes(b"recording")
+    (tmp_path / "link.mcap").symlink_to(recording)
+    for output in (recording, tmp_path / "." / "run.mcap", tmp_path / "link.mcap"):
+        with pytest.raises(AccumError, match=r"is also an input of this run .*run\.mcap\); write the output to another file"):
+            OutputSet([tmp_path / "model.json", output], inputs=[recording, None])
+    assert recording.read_bytes() == b"recording"
+    OutputSet([tmp_path / "model.json"], inputs=[recording, tmp_path / "not-there.json"])   # others pass
+
+
 def test_a_long_name_works(tmp_path):
     target = tmp_path / ("m" * 243 + ".json")
     with atomic_open(target) as f:

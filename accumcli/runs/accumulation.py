@@ -73,7 +73,7 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
     extracting the next frames while this one accumulates (``runs.parallel``; the same model bytes
     whatever the number; None: ``parallel.resolve_workers``).
     """
-    files = OutputSet([*outputs, history, plot, rrd, png, panel])
+    files = OutputSet([*outputs, history, plot, rrd, png, panel], inputs=[recording, truth])
     edges = None
     if truth is not None:
         truth_doc = read_truth(truth)

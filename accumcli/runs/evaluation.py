@@ -64,7 +64,7 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
         if plot:
             from ..plots import plot_frames
 
-            with OutputSet([plot]) as files:
+            with OutputSet([plot], inputs=[path, truth_path]) as files:
                 plot_frames(files.open(plot, "wb"), per_frame, f"accum eval {Path(path).name}: single frames")
         return figures
     raise InputError(f"{path}: expected a model, frames or poses file of accum to evaluate, got a {kind} file")

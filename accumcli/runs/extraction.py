@@ -51,7 +51,7 @@ def extract_recording(recording, output, *, params: ExtractParams = ExtractParam
     recording. ``workers``: extracting processes (the same bytes whatever the number; None:
     ``parallel.resolve_workers``). Needs no
     object pose."""
-    outputs = OutputSet([output, rrd])
+    outputs = OutputSet([output, rrd], inputs=[recording])
     result = ExtractionResult(outputs=[p for p in (output, rrd) if p])
     t0 = time.perf_counter()
     rows = RowCheck()

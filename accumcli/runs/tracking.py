@@ -62,7 +62,8 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
     ``poses_topic``, child frame ``poses_child_frame``, default ``<object>_tracked``, so they sit
     beside the recording's own /tf in Foxglove).
     """
-    if not isinstance(model, Segments):
+    model_file = None if isinstance(model, Segments) else model
+    if model_file is not None:
         model_path, model = model, read_model(model)
     else:
         model_path = "the model"
@@ -70,7 +71,7 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
         raise AccumError(f"{model_path}: the model has no accepted segment (confidence >= 0.5) to track")
     if init_pose is not None:
         init_pose = check_transform(init_pose, "init_pose")
-    files = OutputSet([*outputs, rrd])
+    files = OutputSet([*outputs, rrd], inputs=[recording, model_file])
     tracker = PoseTracker(model, params)
     times, poses, status, extra, trajectory = [], [], [], [], []
     t0 = time.perf_counter()

@@ -74,7 +74,7 @@ def view(paths, *, rrd=None, spawn: bool = False, connect: str | None = None, pn
     if not (rrd or spawn or connect or png):
         raise InputError("nothing to do: give --rrd, --spawn, --connect or --png")
     inputs = ViewInputs.of(paths)
-    files = OutputSet([rrd, png])
+    files = OutputSet([rrd, png], inputs=paths)
     with files:
         if rrd or spawn or connect:
             _log_to_rerun(inputs, files.path(rrd) if rrd else None, spawn, connect, options, frames, progress)
