@@ -25,7 +25,9 @@ from __future__ import annotations
 
 import os
 import shutil
+import socket
 import sys
+import urllib.parse
 import uuid
 from pathlib import Path
 
@@ -91,6 +93,20 @@ def _strips(endpoints: np.ndarray) -> np.ndarray:
     return np.asarray(endpoints, np.float32).reshape(-1, 2, endpoints.shape[-1])
 
 
+def _check_viewer_reachable(url: str) -> None:
+    """AccumError unless something listens at the host and port of a Rerun gRPC ``url`` (rerun
+    connects lazily and only fails at the end of the run, after its 6 s timeout)."""
+    parsed = urllib.parse.urlparse(url)
+    if parsed.scheme not in ("rerun", "rerun+http", "rerun+https") or not parsed.hostname:
+        raise AccumError(f"--connect {url}: expected a Rerun viewer URL such as rerun+http://127.0.0.1:9876/proxy")
+    port = parsed.port or 9876
+    try:
+        socket.create_connection((parsed.hostname, port), timeout=2.0).close()
+    except OSError as e:
+        raise AccumError(f"--connect {url}: no Rerun viewer answers at {parsed.hostname}:{port} ({e.strerror or e}); "
+                         "start one with `rerun`, or write a file with --rrd") from None
+
+
 class RerunLog:
     """Logs accum's frames, segments and models to one Rerun recording."""
 
@@ -113,7 +129,12 @@ class RerunLog:
             except Exception as e:  # the viewer failed to start (rerun raises RuntimeError and others)
                 raise AccumError(f"cannot start the Rerun viewer ({type(e).__name__}: {e}); use --rrd") from None
         else:
-            self.rec.connect_grpc(connect)
+            _check_viewer_reachable(connect)
+            try:
+                self.rec.connect_grpc(connect)
+            except (RuntimeError, ValueError) as e:   # rerun: an invalid endpoint
+                raise AccumError(f"--connect {connect}: {e}") from None
+        self.connect = connect
         self.rec.send_blueprint(layout)
         self.rec.log("world", rr.ViewCoordinates.RDF, static=True)
 
@@ -228,7 +249,13 @@ class RerunLog:
 
     def close(self) -> None:
         """Flush everything to the sink and detach from it (an .rrd is complete afterwards)."""
-        self.rec.flush()
+        try:
+            self.rec.flush()
+        except RuntimeError as e:   # rerun: the viewer went away, or never answered
+            if self.connect is None:
+                raise
+            raise AccumError(f"the Rerun viewer at {self.connect} did not take the data ({e}); "
+                             "start it with `rerun`, or write a file with --rrd") from None
         self.rec.disconnect()
 
     def __enter__(self) -> "RerunLog":

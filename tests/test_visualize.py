@@ -149,6 +149,18 @@ def test_exactly_one_sink(tmp_path):
         RerunLog("accum test", rrd=str(tmp_path / "x.rrd"), kind="nonsense")
 
 
+def test_connect_without_a_viewer_is_one_error_before_the_work():
+    import socket
+
+    with socket.socket() as probe:   # a port nothing listens on once closed
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    with pytest.raises(AccumError, match=rf"no Rerun viewer answers at 127.0.0.1:{port} .*--rrd"):
+        RerunLog("accum test", connect=f"rerun+http://127.0.0.1:{port}/proxy")
+    with pytest.raises(AccumError, match="expected a Rerun viewer URL such as rerun"):
+        RerunLog("accum test", connect="notaurl")
+
+
 def test_trajectory_and_scalars(tmp_path):
     path = tmp_path / "track.rrd"
     log = RerunLog("accum test", rrd=str(path), kind="track")
