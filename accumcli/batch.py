@@ -128,7 +128,11 @@ def run_batch(recordings, outdir, options: BatchOptions = BatchOptions(), *, wor
         raise InputError(f"two recordings have the same name ({', '.join(twice)}): their outputs would collide")
     if workers < 1:
         raise InputError(f"expected at least 1 worker, found {workers}")
-    Path(outdir).mkdir(parents=True, exist_ok=True)
+    try:
+        Path(outdir).mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise AccumError(f"{outdir}: cannot create the output folder ({e.strerror or e}); "
+                         "choose a folder you can write to") from None
     if not os.access(outdir, os.W_OK):
         raise AccumError(f"{outdir}: the output folder is not writable")
     t0 = time.perf_counter()

@@ -425,8 +425,9 @@ def view(inputs, rrd, spawn, connect, png, png_frame, frames, options):
 def batch(recordings, outdir, track, truth_from_sidecar, workers, ray_address, frames, extract_params, options):
     """Accumulate (and optionally track and evaluate) many recordings: OUTDIR/NAME/ each, summary.csv.
 
-    A recording that fails is reported in its row; the others go on. Re-running
-    skips the recordings whose outputs are complete for the same inputs and options.
+    A recording that fails is reported in its row; the others go on, and the exit code is 1 if
+    any failed (for scripts). Re-running skips the recordings whose outputs are complete for the
+    same inputs and options.
 
     \b
     Examples:
@@ -444,6 +445,9 @@ def batch(recordings, outdir, track, truth_from_sidecar, workers, ray_address, f
                f"wrote {result.summary}")
     if result.failed == len(result.rows):
         raise AccumError("every recording failed (see the status column)")
+    if result.failed:
+        raise AccumError(f"{result.failed} of {len(result.rows)} recordings failed (see the status column); "
+                         "the others' outputs are written")
 
 
 # -- eval ------------------------------------------------------------------------------------------

@@ -51,10 +51,22 @@ def test_one_and_two_workers_and_ray_give_the_same_summary(recordings, tmp_path)
     assert summaries[0] == summaries[1] == summaries[2]
 
 
-def test_batch_command_prints_the_table_and_exits_1_when_all_fail(recordings, tmp_path):
+def test_batch_command_prints_the_table_and_exits_1_when_any_fails(recordings, tmp_path):
     runner = CliRunner()
-    ok = runner.invoke(main, ["batch", *recordings, "-o", str(tmp_path / "o"), "--frames", "0:2", "--workers", "1"])
+    ok = runner.invoke(main, ["batch", *recordings[:2], "-o", str(tmp_path / "o"), "--frames", "0:2", "--workers", "1"])
     assert ok.exit_code == 0, ok.output
-    assert "recording" in ok.output.splitlines()[0] and "1 failed" in ok.output
+    assert "recording" in ok.output.splitlines()[0] and "0 failed" in ok.output
+    some = runner.invoke(main, ["batch", *recordings, "-o", str(tmp_path / "o"), "--frames", "0:2", "--workers", "1"])
+    assert some.exit_code == 1 and "1 failed" in some.output
+    assert some.output.strip().splitlines()[-1] == ("error: 1 of 3 recordings failed (see the status column); "
+                                                    "the others' outputs are written")
     bad = runner.invoke(main, ["batch", recordings[2], "-o", str(tmp_path / "p")])
     assert bad.exit_code == 1 and "every recording failed" in bad.output
+
+
+def test_an_output_folder_that_cannot_be_made_is_one_error(recordings, tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    result = CliRunner().invoke(main, ["batch", recordings[0], "-o", str(blocker / "batch")])
+    assert result.exit_code == 1 and "Traceback" not in result.output
+    assert result.output.strip().splitlines()[-1].startswith(f"error: {blocker / 'batch'}: cannot create the output folder")
