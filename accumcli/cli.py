@@ -288,8 +288,8 @@ def extract(recording, output, rrd, with_2d, workers, frames, extract_params, op
 @click.option("--motion", type=click.Choice(["gripper", "tracked"]), default="gripper", show_default=True,
               help="gripper: the recorded poses (the paper); tracked: the recorded poses repaired first, in "
                    "passes over the recording (frame-to-frame refinement on the images, fused with the "
-                   "recorded poses, then refined on the model they give; the extraction runs once, the "
-                   "whole about 2.5 times the time).")
+                   "recorded poses, then refined on the model they give; the extraction runs once; "
+                   "the whole 1.5 to 3 times the time, the progress bar counts every pass).")
 @click.option("--sp", "position_threshold", type=click.FloatRange(0.1, 50.0), default=3.0, show_default=True,
               metavar="MM",
               help="s_p of the paper's metric (association and merging), millimetres.")

@@ -339,3 +339,15 @@ def test_detector_choices_are_the_librarys():
     option = next(p for p in main.commands["extract"].params if p.name == "detector")
     assert isinstance(option.type, click.Choice) and set(option.type.choices) == set(DETECTORS)
     assert option.default == LineParams().detector
+
+
+def test_progress_of_motion_tracked_covers_every_pass(small_recording):
+    from accumcli.pipeline import AccumulateParams
+    from accumcli.runs import accumulate_recording
+    from accumcli.runs.accumulation import TRACKED_PASSES
+
+    calls = []
+    accumulate_recording(small_recording, params=AccumulateParams(motion="tracked"),
+                         progress=lambda done, total: calls.append((done, total)))
+    assert calls[-1] == (6 * TRACKED_PASSES, 6 * TRACKED_PASSES)   # the bar ends full, not after the first fifth
+    assert [done for done, _ in calls] == list(range(1, 6 * TRACKED_PASSES + 1))

@@ -87,11 +87,15 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
         result = AccumulationResult(acc.model(), times=acc.times)
         step, done, rows = None, 0, RowCheck()
 
+        # --motion tracked streams the recording once per pass (``tracked_poses``): one bar over all of them
+        passes = TRACKED_PASSES if params.motion == "tracked" else 1
+        total_steps = None if total is None else total * passes
+
         def frames_with_pose():
             nonlocal done
             for frame in rec.frames(frames.start, frames.stop):
                 done += 1
-                progress(done, total)
+                progress(done, total_steps)
                 if frame.T_camera_object is None:
                     no_pose.warning("no pose", "%s: frame %d: no pose (%s): skipped", recording, frame.index,
                                     frame.pose_problem)
@@ -101,7 +105,13 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
 
         poses, store = None, None
         if params.motion == "tracked":
-            with_pose = (lambda: (f for f in rec.frames(frames.start, frames.stop) if f.T_camera_object is not None))
+            def with_pose():
+                nonlocal done
+                for frame in rec.frames(frames.start, frames.stop):
+                    done += 1
+                    progress(done, total_steps)
+                    if frame.T_camera_object is not None:
+                        yield frame
             store = ExtractionStore()
             poses = tracked_poses(with_pose, params, rec.object_frame, rec.camera_frame, workers, acc.times, store)
         with rerun_log(files, rrd, "accumulate") as viz, scene_log(files, outputs) as scenes, \
@@ -191,6 +201,9 @@ class ExtractionStore:
 
     def close(self) -> None:
         self.file.close()
+
+
+TRACKED_PASSES = 5   # ``tracked_poses``' four passes over the recording, then the accumulation itself
 
 
 def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str, camera_frame: str, workers: int,
