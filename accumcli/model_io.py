@@ -247,9 +247,14 @@ def write_model(target, segments: Segments, **header) -> None:
     write_json(target, segments_to_dict(segments, **header))
 
 
+def load_model_doc(path) -> dict:
+    """The parsed model JSON, header fields included (``segments_from_dict`` reads its segments)."""
+    return _load_json(path, "model")
+
+
 def read_model(path) -> Segments:
     """The segments of a model JSON; FileFormatError for any other kind of file or a malformed model."""
-    return segments_from_dict(_load_json(path, "model"), str(path))
+    return segments_from_dict(load_model_doc(path), str(path))
 
 
 def confidence_rgb(confidence: np.ndarray) -> np.ndarray:

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
+
 
 def info_lines(summary, object_frame: str, camera_frame: str) -> list[str]:
     """``accum info``'s summary of a ``RecordingInfo``."""
@@ -68,8 +70,10 @@ def accumulation_lines(result, motion: str = "gripper") -> list[str]:
 
 def tracking_lines(result) -> list[str]:
     n = result.frames
-    lines = [f"{n} frames: {result.tracked} tracked ({result.tracked / max(n, 1):.0%}), median residual "
-             f"{result.median_residual_px:.2f} px, {result.frames_per_second:.1f} frames/s"]
+    residual = (f"median residual {result.median_residual_px:.2f} px" if np.isfinite(result.median_residual_px)
+                else "no residual (no frame tracked)")
+    lines = [f"{n} frames: {result.tracked} tracked ({result.tracked / max(n, 1):.0%}), {residual}, "
+             f"{result.frames_per_second:.1f} frames/s"]
     if result.params is not None:
         lines.append(f"limits from the first frame: RMS <= {result.params.max_rms_px:.2f} px, inlier share >= "
                      f"{result.params.min_inlier_fraction:.2f}")
@@ -78,5 +82,8 @@ def tracking_lines(result) -> list[str]:
 
 def figures_lines(figures: dict) -> list[str]:
     """``accum eval``'s figures, one per line."""
-    return [f"{key:<28} {value:.4f}" if isinstance(value, float) else f"{key:<28} {value}"
-            for key, value in figures.items()]
+    def cell(value):
+        if isinstance(value, float):
+            return f"{value:.4f}" if np.isfinite(value) else "-"
+        return value
+    return [f"{key:<28} {cell(value)}" for key, value in figures.items()]

@@ -196,6 +196,28 @@ def test_eval_refuses_the_truth_of_another_object(small_recording, tmp_path):
     assert "the truth is of object frame 'board', the model of 'gripper'" in result.output
 
 
+def test_a_truth_or_poses_of_other_times_are_refused_everywhere(small_recording, tmp_path):
+    import json
+
+    truth = json.loads(open(small_recording.replace(".mcap", ".truth.json")).read())
+    for pose in truth["poses"]:
+        pose["timestamp_ns"] += 10 ** 12          # the same object, recorded 1000 s later
+    other = tmp_path / "later.truth.json"
+    other.write_text(json.dumps(truth))
+    model = tmp_path / "m.json"
+    assert run("accumulate", small_recording, "-o", model, "--frames", "0:2").exit_code == 0
+    assert json.loads(model.read_text())["source_times_ns"][0] > 0
+    poses = tmp_path / "p.json"
+    poses.write_text(json.dumps({"format": "accum.poses/1", "parent_frame_id": "camera_left", "child_frame_id": "gripper",
+                                 "poses": [{**p, "status": "tracked"} for p in truth["poses"]]}))
+    for args in (["eval", model, other], ["accumulate", small_recording, "-o", tmp_path / "m2.json", "--truth", other],
+                 ["view", small_recording, model, poses, "--png", tmp_path / "v.png"]):
+        result = run(*args)
+        assert result.exit_code == 1, args
+        assert "lie outside those of" in result.output and "is it of another recording?" in result.output
+    assert not (tmp_path / "m2.json").exists() and not (tmp_path / "v.png").exists()
+
+
 def test_eval_refuses_poses_of_another_recording(small_recording, tmp_path):
     import json
 

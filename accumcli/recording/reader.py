@@ -221,7 +221,8 @@ class Recording:
 
     With ``require_pose=False`` a recording without /tf or without a path to the
     object frame opens, and its frames carry ``T_camera_object = None``.
-    After opening: ``frame_count_hint`` is the number of stereo pairs (counted
+    After opening: ``time_span_ns`` (first, last) the image timestamps (None: no image);
+    ``frame_count_hint`` is the number of stereo pairs (counted
     in the first pass, exact), ``stereo_offset_ns`` the typical left/right
     offset (ns, or None), ``lost_bytes`` the bytes of a truncated or damaged
     file that could not be read.
@@ -344,6 +345,7 @@ class Recording:
         t = self.topics
         sides = {t.left_calibration: "left", t.right_calibration: "right"}
         self.frame_count_hint, unpaired = 0, {"count": 0}
+        self.time_span_ns: tuple[int, int] | None = None
 
         def count_unpaired(is_left, item):
             unpaired["count"] += 1
@@ -359,6 +361,8 @@ class Recording:
                     t_ns = self._stamp(msg, log_time, warn, topic)
                     if t_ns is not None:
                         self.frame_count_hint += len(pairing.add(topic, _PendingImage(t_ns, None)))
+                        span = self.time_span_ns or (t_ns, t_ns)
+                        self.time_span_ns = (min(span[0], t_ns), max(span[1], t_ns))
                     continue
                 if topic in sides:
                     try:

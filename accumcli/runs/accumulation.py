@@ -23,7 +23,7 @@ from ..pipeline import AccumulateParams, LineAccumulation
 from ..row_check import RowCheck
 from ..segments import Segments
 from .base import FrameRange, Progress, RecordingOptions, no_progress, nothing_done
-from .checks import check_truth_matches
+from .checks import check_same_time, check_truth_matches
 from .frame_logs import rerun_log, scene_log
 from .parallel import extracted_frames, resolve_workers
 
@@ -82,6 +82,8 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
     t0 = time.perf_counter()
     with options.open(recording) as rec, files:
         total = frames.check(rec)
+        if truth is not None:
+            check_same_time(truth_doc.times_ns, rec.time_span_ns, options.tolerance_ns, truth, recording)
         workers = resolve_workers(workers, total)
         acc = LineAccumulation(params, rec.object_frame, rec.camera_frame)
         result = AccumulationResult(acc.model(), times=acc.times)
@@ -153,8 +155,9 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
                 continue   # written frame by frame above
             if str(path).lower().endswith(".ply"):
                 write_ply(files.open(path), result.model, all_segments=ply_all)
-            else:
-                write_model(files.open(path), result.model)
+            else:   # the times it was accumulated over: ``accum eval`` refuses a truth of other times
+                write_model(files.open(path), result.model,
+                            source_times_ns=[result.rows[0]["timestamp_ns"], result.rows[-1]["timestamp_ns"]])
         if history:
             write_json_lines(files.open(history), result.rows)
         if plot:

@@ -28,3 +28,17 @@ def check_truth_times(truth, times_ns: np.ndarray, tolerance_ns: int, what, trut
     if not (nearest <= tolerance_ns).any():
         raise AccumError(f"{truth_path}: none of the {len(times_ns)} timestamps of {what} has a truth pose "
                          f"(nearest {nearest.min() * 1e-9:.3f} s away): is it the truth of another recording?")
+
+
+def check_same_time(times_ns: np.ndarray, span_ns, tolerance_ns: int, what, other) -> None:
+    """``what`` (its timestamps ``times_ns``) and ``other`` (its first and last timestamp ``span_ns``;
+    None: unknown, nothing checked) must overlap in time: a truth or poses file of another recording
+    would otherwise give figures of 0, or place nothing, that look like a result."""
+    times_ns = np.asarray(times_ns, np.int64)
+    if span_ns is None or len(times_ns) == 0:
+        return
+    first, last = int(span_ns[0]), int(span_ns[1])
+    if times_ns.max() < first - tolerance_ns or times_ns.min() > last + tolerance_ns:
+        raise AccumError(f"{what}: its times ({times_ns.min() * 1e-9:.3f} to {times_ns.max() * 1e-9:.3f} s) lie "
+                         f"outside those of {other} ({first * 1e-9:.3f} to {last * 1e-9:.3f} s): "
+                         "is it of another recording?")

@@ -10,11 +10,11 @@ import numpy as np
 from ..errors import InputError
 from ..evaluate import Tolerances, evaluate_frames, evaluate_model, pose_errors
 from ..funnel import funnel
-from ..model_io import check_kind, read_frames, read_model, read_poses, read_truth
+from ..model_io import check_kind, load_model_doc, read_frames, read_poses, read_truth, segments_from_dict
 from ..outputs import OutputSet
 from ..surface import faces_of, support_face_problem, surface_scores
 from .base import FrameRange
-from .checks import check_truth_matches, check_truth_times
+from .checks import check_same_time, check_truth_matches, check_truth_times
 
 TIME_TOLERANCE_NS = 1_000_000
 log = logging.getLogger("accumcli")
@@ -32,8 +32,13 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
     truth = read_truth(truth_path)
     kind = check_kind(path, "model", "frames", "poses")
     if kind == "model":
-        model = read_model(path)
+        doc = load_model_doc(path)
+        model = segments_from_dict(doc, str(path))
         check_truth_matches(truth, model.frame_id, truth_path)
+        span = doc.get("source_times_ns")   # written by accum accumulate (not by the contract: may be absent)
+        if isinstance(span, list) and len(span) == 2 and all(isinstance(t, int) for t in span):
+            check_same_time(truth.times_ns, span, TIME_TOLERANCE_NS, truth_path,
+                            f"the frames {path} was accumulated over")
         figures = evaluate_model(model, truth, tol)
         faces = faces_of(truth.meta)
         if faces:

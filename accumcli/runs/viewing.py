@@ -13,6 +13,7 @@ from ..model_io import check_kind, read_frames, read_model, read_poses, read_tru
 from ..outputs import OutputSet
 from ..segments import Segments
 from .base import FrameRange, Progress, RecordingOptions, no_progress
+from .checks import check_same_time
 
 
 @dataclass
@@ -23,6 +24,7 @@ class ViewInputs:
     recording: str | None = None
     models: dict = field(default_factory=dict)
     tracks: list = field(default_factory=list)
+    track_paths: list = field(default_factory=list)
     frames_files: list = field(default_factory=list)
 
     @classmethod
@@ -45,11 +47,18 @@ class ViewInputs:
                                                   np.ones(len(length)), np.ones(len(length), np.int64))
             elif kind == "poses":
                 inputs.tracks.append(read_poses(path))
+                inputs.track_paths.append(str(path))
             elif kind == "frames":
                 inputs.frames_files.append(str(path))
             else:
                 raise InputError(f"{path}: accum view cannot show a {kind} file")
         return inputs
+
+    def check_tracks(self, span_ns, tolerance_ns: int, recording: str) -> None:
+        """AccumError when a poses file's times lie outside the recording's (``span_ns``): it would
+        place nothing, and the recording's own poses would be shown instead without a word."""
+        for track, path in zip(self.tracks, self.track_paths):
+            check_same_time(track.times_ns, span_ns, tolerance_ns, path, recording)
 
     def pose_at(self, t_ns: int, recorded: np.ndarray | None, tolerance_ns: int) -> np.ndarray | None:
         """The object's pose at ``t_ns``: from the first poses file that has a finite one within the
@@ -91,6 +100,7 @@ def _log_to_rerun(inputs: ViewInputs, rrd, spawn, connect, options, frames, prog
     if inputs.recording:
         with options.open(inputs.recording, require_pose=False) as rec:
             total = frames.check(rec)
+            inputs.check_tracks(rec.time_span_ns, options.tolerance_ns, inputs.recording)
             for done, frame in enumerate(rec.frames(frames.start, frames.stop), 1):
                 T = inputs.pose_at(frame.timestamp_ns, frame.T_camera_object, options.tolerance_ns)
                 viz.recording_frame(frame, inputs.models, T)
@@ -123,6 +133,7 @@ def _draw_picture(inputs: ViewInputs, png, png_frame, options) -> None:
         write_png(png, render_model(named[0]))
         return
     with options.open(inputs.recording, require_pose=False) as rec:
+        inputs.check_tracks(rec.time_span_ns, options.tolerance_ns, inputs.recording)
         wanted = png_frame if png_frame is not None else rec.frame_count_hint // 2
         for frame in rec.frames(wanted, wanted + 1):
             T = inputs.pose_at(frame.timestamp_ns, frame.T_camera_object, options.tolerance_ns)
