@@ -139,6 +139,8 @@ def test_frames_without_pose_are_skipped_with_a_warning(tmp_path):
     assert result.exit_code == 0, result.output
     assert result.output.count("warning:") == 2 and "frame 3: no pose" in result.output
     assert "2 skipped without a pose" in result.output
+    info = run("info", path)   # the reason, once for the frames it holds for
+    assert "2 frame(s): camera_left -> gripper: outside the transform samples [" in info.output
 
 
 @pytest.mark.parametrize("args, message", [

@@ -60,6 +60,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import re
 from collections import deque
 from dataclasses import dataclass, field
 from typing import Callable, Iterator
@@ -555,7 +556,7 @@ class Recording:
                 self.pose_at(t_ns)
                 info.frames_with_pose += 1
             except PoseUnavailable as e:
-                reason = str(e).split(": time")[0] if ": time" in str(e) else str(e)
+                reason = re.sub(r"time -?[0-9.]+ s is ", "", str(e))   # one reason for all the frames it holds for
                 problems[reason] = problems.get(reason, 0) + 1
         info.pose_problems = sorted(problems.items())
         return info
