@@ -123,7 +123,7 @@ def detect_chains(image: np.ndarray, params: LineParams, grad: Gradients | None 
     points = edge_points(grad, with_phi=False)
     chains = straight_chains(points, image.shape, min_length_px=params.chain_min_support_px)
     line_of_chain = collinear_lines(points, chains, 2 * params.junction_radius_px)
-    t0 = times.add("hough", t0)  # the line-finding stage, for comparable breakdowns
+    t0 = times.add("lines", t0)  # the line-finding stage (whatever the detector), for comparable breakdowns
     segments = local_segments(points, chains, params, adapt_length=True, line_fit=True,
                               min_support_px=params.chain_min_support_px)
     # the chain's fit orients a piece better than its 13 cuts near a corner: refinement may turn it 1 deg

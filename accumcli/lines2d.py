@@ -558,7 +558,7 @@ def detect_hough(image: np.ndarray, params: LineParams, grad: Gradients | None =
     grad, times, t0 = detection_start(image, params, grad, times)
     points = edge_points(grad)
     labels = hough_assign(points, image.shape, params)
-    t0 = times.add("hough", t0)
+    t0 = times.add("lines", t0)
     segments = refine_on_gradient(local_segments(points, labels, params), grad.magnitude)
     times.add("local segments", t0)
     return segments
@@ -606,7 +606,7 @@ def _detect_with(find_lines, image: np.ndarray, params: LineParams, grad: Gradie
     params)`` returns, with the same stage breakdown as the Hough detector."""
     grad, times, t0 = detection_start(image, params, grad, times)
     ends = np.asarray(find_lines(image, params), np.float64).reshape(-1, 4)
-    t0 = times.add("hough", t0)  # the line-finding stage, for comparable breakdowns
+    t0 = times.add("lines", t0)  # the line-finding stage (whatever the detector), for comparable breakdowns
     segments = pieces_on_lines(ends[:, :2], ends[:, 2:], grad, params)
     times.add("local segments", t0)
     return segments

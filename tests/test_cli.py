@@ -375,3 +375,22 @@ def test_progress_of_motion_tracked_covers_every_pass(small_recording):
                          progress=lambda done, total: calls.append((done, total)))
     assert calls[-1] == (6 * TRACKED_PASSES, 6 * TRACKED_PASSES)   # the bar ends full, not after the first fifth
     assert [done for done, _ in calls] == list(range(1, 6 * TRACKED_PASSES + 1))
+
+
+@pytest.mark.parametrize("args, message", [
+    (["accumulate", "{rec}", "-o", "{tmp}/m.json", "--all"], "--all chooses what a .ply output holds"),
+    (["view", "{rec}", "{model}", "--png", "{tmp}/v.png", "--png-frame", "4", "--frames", "0:2"],
+     "--png-frame 4 lies outside --frames 0:2"),
+    (["eval", "{model}", "{truth}", "--plot", "{tmp}/p.png"], "--plot draws a frames file's figures"),
+    (["eval", "{model}", "{truth}", "--frames", "0:1"], "--frames selects lines of a frames or poses file"),
+    (["eval", "{frames}", "{truth}", "--frames", "9:"], "--frames 9: selects no line (the file has 2)"),
+])
+def test_an_option_that_would_do_nothing_is_an_error(small_recording, tmp_path, args, message):
+    model, frames = tmp_path / "m0.json", tmp_path / "f.jsonl"
+    assert run("accumulate", small_recording, "-o", model, "--frames", "0:2").exit_code == 0
+    assert run("extract", small_recording, "-o", frames, "--frames", "0:2").exit_code == 0
+    names = dict(rec=small_recording, tmp=tmp_path, model=model, frames=frames,
+                 truth=small_recording.replace(".mcap", ".truth.json"))
+    result = run(*[a.format(**names) for a in args])
+    assert result.exit_code == 1 and message in result.output.strip().splitlines()[-1], result.output
+    assert not any(p.name in ("m.json", "v.png", "p.png") for p in tmp_path.iterdir())

@@ -13,7 +13,7 @@ def test_two_workers_give_the_same_model_and_frames_bytes(small_recording, tmp_p
         extract_recording(small_recording, str(frames), frames=FrameRange(0, 4), workers=workers)
         outputs[workers] = (model.read_bytes(), frames.read_bytes(), result.frames, sorted(result.times.seconds))
     assert outputs[1] == outputs[2]
-    assert outputs[1][2] == 4 and "hough" in outputs[1][3]
+    assert outputs[1][2] == 4 and "lines" in outputs[1][3]
 
 
 def test_this_process_and_a_ready_helper_share_the_frames_and_hand_them_back_in_order(small_recording, monkeypatch):
@@ -54,7 +54,7 @@ def test_this_process_and_a_ready_helper_share_the_frames_and_hand_them_back_in_
     for (_, extraction), frame in zip(got, frames):
         alone = extract_frame(frame, params, "camera_left")
         assert np.array_equal(extraction.segments.centers, alone.segments.centers)
-    assert times.seconds["hough"] > 0
+    assert times.seconds["lines"] > 0
 
 
 def test_auto_workers_use_both_cores_only_for_recordings_long_enough(monkeypatch):

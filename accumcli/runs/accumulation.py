@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError
 from ..evaluate import EdgeSamples, score_segments
 from ..lines2d import StageTimes
 from ..logs import LimitedWarnings
@@ -73,6 +74,8 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
     extracting the next frames while this one accumulates (``runs.parallel``; the same model bytes
     whatever the number; None: ``parallel.resolve_workers``).
     """
+    if ply_all and not any(str(path).lower().endswith(".ply") for path in outputs):
+        raise InputError("--all chooses what a .ply output holds, and no .ply output is given")
     files = OutputSet([*outputs, history, plot, rrd, png, panel], inputs=[recording, truth])
     edges = None
     if truth is not None:

@@ -31,6 +31,10 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
     ``plot``: a PNG of a frames file's figures frame by frame (``plots``)."""
     truth = read_truth(truth_path)
     kind = check_kind(path, "model", "frames", "poses")
+    if plot and kind != "frames":
+        raise InputError(f"{path}: --plot draws a frames file's figures frame by frame; this is a {kind} file")
+    if kind == "model" and frames != FrameRange():
+        raise InputError(f"{path}: --frames selects lines of a frames or poses file; a model has none")
     if kind == "model":
         doc = load_model_doc(path)
         model = segments_from_dict(doc, str(path))
@@ -56,12 +60,15 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
         check_truth_matches(truth, track.child_frame_id, truth_path)
         keep = slice(frames.start, frames.stop)
         times = track.times_ns[keep]
+        _check_selected(len(times), len(track.times_ns), frames, path)
         check_truth_times(truth, times, TIME_TOLERANCE_NS, path, truth_path)
         return pose_errors(times, track.poses[keep], track.status[keep], truth)
     if kind == "frames":
         rows = [row for i, row in enumerate(read_frames(path))
                 if i >= frames.start and (frames.stop is None or i < frames.stop)]
         times = np.array([t for t, _, _ in rows], np.int64)
+        if not rows:
+            _check_selected(0, sum(1 for _ in read_frames(path)), frames, path)
         check_truth_times(truth, times, TIME_TOLERANCE_NS, path, truth_path)
         per_frame = []
         figures = {**evaluate_frames([(t, s) for t, s, _ in rows], truth, tol, per_frame),
@@ -73,3 +80,9 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
                 plot_frames(files.open(plot, "wb"), per_frame, f"accum eval {Path(path).name}: single frames")
         return figures
     raise InputError(f"{path}: expected a model, frames or poses file of accum to evaluate, got a {kind} file")
+
+
+def _check_selected(selected: int, lines: int, frames: FrameRange, path) -> None:
+    """InputError when ``frames`` selects none of the ``lines`` of a frames or poses file."""
+    if selected == 0 and lines > 0:
+        raise InputError(f"{path}: --frames {frames} selects no line (the file has {lines})")

@@ -82,6 +82,8 @@ def view(paths, *, rrd=None, spawn: bool = False, connect: str | None = None, pn
         raise InputError("choose one of --rrd, --spawn and --connect")
     if not (rrd or spawn or connect or png):
         raise InputError("nothing to do: give --rrd, --spawn, --connect or --png")
+    if png_frame is not None and not (png_frame >= frames.start and (frames.stop is None or png_frame < frames.stop)):
+        raise InputError(f"--png-frame {png_frame} lies outside --frames {frames}")
     inputs = ViewInputs.of(paths)
     files = OutputSet([rrd, png], inputs=paths)
     with files:
