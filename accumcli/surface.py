@@ -100,10 +100,19 @@ def support_face_problem(faces: list[Face], support_face: int, poses: np.ndarray
         return None
     problem = f"support face {support_face} faces the cameras in {share:.0%} of the truth's poses, so the object " \
               "cannot stand on it"
-    hidden = int(np.argmin(np.median(facing, axis=1)))
-    if hidden == support_face or np.median(facing[hidden]) >= 0:
+    hidden = hidden_face(faces, poses)
+    if hidden is None or hidden == support_face:
         return problem + " (and no face of the truth faces away from them)"
     return problem + f"; face {hidden} faces away the most (try --support-face {hidden})"
+
+
+def hidden_face(faces: list[Face], poses: np.ndarray) -> int | None:
+    """The face turned away from the cameras the most over the truth's ``poses`` (median facing
+    cosine below 0), or None: what an object standing on a board would stand on."""
+    if not len(poses) or not faces:
+        return None
+    facing = np.median(np.array([facing_camera(face, poses) for face in faces]), axis=1)
+    return int(np.argmin(facing)) if facing.min() < 0 else None
 
 
 def surface_scores(model: Segments, faces: list[Face], tol: Tolerances = Tolerances(),

@@ -35,6 +35,23 @@ def test_bad_recordings_end_in_one_line(tmp_path, command, case):
     assert "Traceback" not in result.output
 
 
+def test_renamed_foxglove_topics_are_proposed(tmp_path):
+    from accumcli.recording import RecordingWriter
+
+    from . import helpers
+
+    path = tmp_path / "renamed.mcap"
+    with RecordingWriter(path) as w:
+        for side in ("left", "right"):
+            w.calibration(f"/cam/{side}/calibration", helpers.calibration(side), helpers.T0)
+            w.image(f"/cam/{side}/image", helpers.image(0), helpers.T0, f"camera_{side}", "png")
+    result = run("info", path)
+    assert result.exit_code == 1
+    assert ("missing topic /stereo/left/image; the stereo pair looks like: try --left-topic /cam/left/image "
+            "--right-topic /cam/right/image --left-calibration-topic /cam/left/calibration "
+            "--right-calibration-topic /cam/right/calibration") in result.output
+
+
 def test_info_reports_missing_object_frame(tmp_path):
     path, _ = broken_files(tmp_path)["no tf"]
     result = run("info", path)

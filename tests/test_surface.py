@@ -96,3 +96,6 @@ def test_eval_warns_of_a_support_face_that_faces_the_cameras(tmp_path, caplog):
     with caplog.at_level("WARNING", logger="accumcli"):
         evaluate_file(str(model), str(truth), support_face=4)
     assert "support face" not in caplog.text
+    with caplog.at_level("WARNING", logger="accumcli"):   # none given: the hidden face is proposed
+        evaluate_file(str(model), str(truth))
+    assert "surface figures count the object's faces only" in caplog.text and "--support-face 4" in caplog.text

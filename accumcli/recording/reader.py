@@ -425,6 +425,10 @@ class Recording:
             if topic not in self._channels:
                 proposal = ros2.propose_topics(self._channels)
                 hint = f"; this recording looks like ROS 2: try {proposal}" if proposal else ""
+                if not proposal:
+                    proposal = ros2.propose_topics(self._channels, tuple(IMAGE_TYPES), tuple(CALIBRATION_TYPES),
+                                                   "foxglove.RawImage")
+                    hint = f"; the stereo pair looks like: try {proposal}" if proposal else ""
                 raise self._fail(f"missing topic {topic}{hint} (topics found: {available}){self._lost()}")
         for topic, role in self._roles().items():
             channel = self._channels.get(topic)

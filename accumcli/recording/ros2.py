@@ -198,23 +198,26 @@ class RosbagScan:
         return lambda data: convert(store.deserialize_cdr(bytes(data), name))
 
 
-def propose_topics(channels: dict[str, _Channel]) -> str | None:
+def propose_topics(channels: dict[str, _Channel], image_types=ROS_IMAGE_TYPES,
+                   calibration_types=(ROS_CAMERA_INFO,), raw_image=ROS_IMAGE) -> str | None:
     """'--left-topic ... --right-calibration-topic ...' from the message types, or None.
 
     Image (or CompressedImage) topics with a CameraInfo topic in their namespace or the one above
     (/cam/left/image_raw or /cam/left/image_raw/compressed with /cam/left/camera_info). Per camera
     the raw image is preferred (accum rectifies), then an uncompressed one, then the shortest name;
-    the camera whose namespace names "left" (else the first by name) is the left one.
+    the camera whose namespace names "left" (else the first by name) is the left one. The schema
+    names are ROS 2's unless given (a Foxglove recording's: foxglove.RawImage and
+    foxglove.CompressedImage with foxglove.CameraCalibration).
     """
-    infos = {t.rsplit("/", 1)[0]: t for t, c in channels.items() if c.schema_name == ROS_CAMERA_INFO}
+    infos = {t.rsplit("/", 1)[0]: t for t, c in channels.items() if c.schema_name in calibration_types}
     cameras: dict[str, list] = {}
     for topic, c in channels.items():
-        if c.schema_name not in ROS_IMAGE_TYPES:
+        if c.schema_name not in image_types:
             continue
         ns = topic.rsplit("/", 1)[0]
         owner = ns if ns in infos else ns.rsplit("/", 1)[0] if ns.rsplit("/", 1)[0] in infos else None
         if owner is not None:
-            rank = ("image_raw" not in topic, c.schema_name != ROS_IMAGE, len(topic), topic)
+            rank = ("image_raw" not in topic, c.schema_name != raw_image, len(topic), topic)
             cameras.setdefault(owner, []).append((rank, topic))
     if len(cameras) < 2:
         return None

@@ -12,7 +12,7 @@ from ..evaluate import Tolerances, evaluate_frames, evaluate_model, pose_errors
 from ..funnel import funnel
 from ..model_io import check_kind, load_model_doc, read_frames, read_poses, read_truth, segments_from_dict
 from ..outputs import OutputSet
-from ..surface import faces_of, support_face_problem, surface_scores
+from ..surface import faces_of, hidden_face, support_face_problem, surface_scores
 from .base import FrameRange
 from .checks import check_same_time, check_truth_matches, check_truth_times
 
@@ -52,6 +52,11 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
             if problem:
                 log.warning("%s: %s", truth_path, problem)
             figures.update(surface_scores(model, faces, tol, support_face))
+            hidden = hidden_face(faces, truth.poses) if support_face is None else None
+            if hidden is not None:
+                log.warning("%s: surface figures count the object's faces only; if it stands on a board that "
+                            "moves with it, give --support-face %d (the face turned away from the cameras "
+                            "the most) to count the board's plane too", truth_path, hidden)
         elif support_face is not None:
             raise InputError(f"{truth_path}: the truth has no faces, so no support face {support_face}")
         return figures
