@@ -65,6 +65,9 @@ def accumulation_lines(result, motion: str = "gripper") -> list[str]:
         s = result.scores
         lines.append(f"against the truth: precision {s['precision']:.3f}, completeness {s['completeness']:.3f}, "
                      f"background {s['background']:.3f}")
+        if s.get("judge_by_surface"):
+            lines.append("(by the edges: this truth has faces, by which `accum eval MODEL TRUTH` judges "
+                         "precision and background on the object's surface)")
     return lines
 
 

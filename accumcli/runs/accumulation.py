@@ -15,6 +15,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..evaluate import EdgeSamples, score_segments
+from ..surface import faces_of
 from ..lines2d import StageTimes
 from ..logs import LimitedWarnings
 from ..model_io import read_truth, write_json_lines, write_model, write_ply
@@ -153,6 +154,8 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
         if edges is not None:   # the last row scored this very model
             result.scores = {"segments": result.accepted,
                              **{k: result.rows[-1][k] for k in ("precision", "completeness", "background")}}
+            if faces_of(truth_doc.meta):   # such a truth judges precision by surface (``accum eval``)
+                result.scores["judge_by_surface"] = True
         for path in outputs:
             if str(path).lower().endswith(".mcap"):
                 continue   # written frame by frame above
