@@ -15,7 +15,6 @@ import numpy as np
 
 from ..errors import InputError
 from ..evaluate import EdgeSamples, score_segments
-from ..surface import faces_of
 from ..lines2d import StageTimes
 from ..logs import LimitedWarnings
 from ..model_io import read_truth, write_json_lines, write_model, write_ply
@@ -24,6 +23,7 @@ from ..outputs import OutputSet
 from ..pipeline import AccumulateParams, LineAccumulation
 from ..row_check import RowCheck
 from ..segments import Segments
+from ..surface import faces_of
 from .base import FrameRange, Progress, RecordingOptions, no_progress, nothing_done
 from .checks import check_same_time, check_truth_matches
 from .frame_logs import rerun_log, scene_log
@@ -97,11 +97,15 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
         passes = TRACKED_PASSES if params.motion == "tracked" else 1
         total_steps = None if total is None else total * passes
 
-        def frames_with_pose():
+        def counted_frames():
             nonlocal done
             for frame in rec.frames(frames.start, frames.stop):
                 done += 1
                 progress(done, total_steps)
+                yield frame
+
+        def frames_with_pose():
+            for frame in counted_frames():
                 if frame.T_camera_object is None:
                     no_pose.warning("no pose", "%s: frame %d: no pose (%s): skipped", recording, frame.index,
                                     frame.pose_problem)
@@ -111,13 +115,7 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
 
         poses, store = None, None
         if params.motion == "tracked":
-            def with_pose():
-                nonlocal done
-                for frame in rec.frames(frames.start, frames.stop):
-                    done += 1
-                    progress(done, total_steps)
-                    if frame.T_camera_object is not None:
-                        yield frame
+            with_pose = (lambda: (f for f in counted_frames() if f.T_camera_object is not None))
             store = ExtractionStore()
             poses = tracked_poses(with_pose, params, rec.object_frame, rec.camera_frame, workers, acc.times, store)
         with rerun_log(files, rrd, "accumulate") as viz, scene_log(files, outputs) as scenes, \
