@@ -78,7 +78,7 @@ def tracking_lines(result) -> list[str]:
     lines = [f"{n} frames: {result.tracked} tracked ({result.tracked / max(n, 1):.0%}), {residual}, "
              f"{result.frames_per_second:.1f} frames/s"]
     if result.params is not None:
-        lines.append(f"limits from the first frame: RMS <= {result.params.max_rms_px:.2f} px, inlier share >= "
+        lines.append(f"limits from {result.limits_source}: RMS <= {result.params.max_rms_px:.2f} px, inlier share >= "
                      f"{result.params.min_inlier_fraction:.2f}")
     return lines
 

@@ -615,7 +615,11 @@ def calibrated(params: TrackParams, first: PoseEstimate) -> TrackParams:
     ``min_inlier_fraction_floor``. Why: real images (rectification, calibration, a printed object's
     texture) leave an inlier RMS of 0.7 px and a share of 0.85 at the right pose (teabox), where the
     simulator leaves 0.3-0.5 px and 0.95; fixed limits either lose every real frame or let the
-    simulator's wrong local minima through (a limit of 0.8 px passed an 8.8 deg pose on sim_206)."""
+    simulator's wrong local minima through (a limit of 0.8 px passed an 8.8 deg pose on sim_206).
+    ``PoseTracker.update`` calibrates only from a given pose whose refinement covers ``min_coverage``
+    of the visible model, else from the first frame verified with the default limits: an ``--init``
+    10 mm off on dev_steps_track (coverage 0.25) had loosened them to 0.77 px / 0.80 for the whole run
+    (52 of 60 frames tracked, 2 ambiguous, against 60 from the right pose)."""
     if not np.isfinite(first.residual_px) or not first.measured:
         return params
     rms = min(params.max_rms_cap_px, max(params.max_rms_px, params.rms_ratio * first.residual_px))
@@ -865,6 +869,9 @@ class PoseTracker:
         self._accepted = _accepted(self.model)     # what tracking uses, selected once
         self._symmetries = None
         self._calibrated = False       # the residual limits adapted from the first given pose (``calibrated``)
+        self.calibration_refused: str | None = None   # why they were not (the given pose did not fit)
+        self.limits_source = "the first frame"        # where the limits in ``params`` come from (for reports)
+        self._learn_from_next_verified = False
         self._recent_rms = collections.deque(maxlen=self.params.recent_frames)   # of the last tracked frames, px
         self._undecided: list[np.ndarray] = []   # the poses of the last 'ambiguous' frame, until one is tracked
 
@@ -1006,9 +1013,17 @@ class PoseTracker:
         if T_guess is None:
             candidates += self._carried(candidates, frame, grads)
         if T_guess is not None and p.calibrate_limits and not self._calibrated:
-            self.params = p = calibrated(p, candidates[0])      # from the given pose's refinement
             self._calibrated = True
-            candidates = [judge(c, p) for c in candidates]
+            if candidates[0].coverage >= p.min_coverage:   # the given pose fits the images: learn from it
+                self.params = p = calibrated(p, candidates[0])
+                candidates = [judge(c, p) for c in candidates]
+            else:   # a wrong start must not loosen the limits: they wait for the first verified frame
+                self.calibration_refused = (f"the given pose of the first frame does not fit its images "
+                                            f"(coverage {candidates[0].coverage:.2f} of the visible model, "
+                                            f"needs {p.min_coverage}): the residual limits are learnt from "
+                                            "the first frame verified with the default ones")
+                self.limits_source = "the defaults (the given first pose did not fit)"
+                self._learn_from_next_verified = True
         if not reacquiring and candidates and not any(c.status == "tracked" for c in candidates) and self.history:
             wide = _refine(self._accepted, frame, self.history[-1][1], p, grads, p.reacquire_search_px,
                                p.reacquire_tukey_px)
@@ -1074,6 +1089,10 @@ class PoseTracker:
             best.reason = f"{best.reason}; {reacquisition}" if best.reason else reacquisition
         if best.status == "lost" and ran:
             best.T_camera_object = np.full((4, 4), np.nan)     # a re-acquisition returns a verified pose or none
+        if best.status == "tracked" and self._learn_from_next_verified:
+            self._learn_from_next_verified = False
+            self.params = calibrated(self.params, best)   # verified under the defaults: a right pose
+            self.limits_source = f"frame {frame.index}, the first verified (the given first pose did not fit)"
         if best.status == "tracked":
             self.history = (self.history + [(frame.timestamp_ns, best.T_camera_object)])[-2:]
             self._recent_rms.append(best.residual_px)

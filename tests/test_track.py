@@ -491,6 +491,28 @@ def test_every_tracked_pose_is_within_3_degrees_and_5_mm_and_carries_its_figures
                 assert max(figures["std_translation_mm"]) < 2.0
 
 
+def test_a_wrong_given_first_pose_does_not_loosen_the_limits(noisy_pair, model_of_exact):
+    """A start 60 mm off covers little of the model: the limits stay at the defaults until a frame
+    verifies with them, and are learnt from that one."""
+    from accumcli.track import TrackParams
+
+    exact, _ = noisy_pair
+    tracker = PoseTracker(model_of_exact)
+    with Recording(exact) as rec:
+        frames = list(rec.frames(0, 4))
+    wrong = make_transform(np.eye(3), [0.060, 0.0, 0.0]) @ frames[0].T_camera_object
+    first = tracker.update(frames[0], wrong)
+    assert first.status != "tracked" and first.coverage < TrackParams().min_coverage
+    assert tracker.params == TrackParams() and "does not fit its images" in tracker.calibration_refused
+    assert tracker.limits_source.startswith("the defaults")
+    later = [tracker.update(frame, frame.T_camera_object) for frame in frames[1:]]   # right poses from here
+    verified = next(i for i, e in enumerate(later, 1) if e.status == "tracked")
+    assert tracker.limits_source.startswith(f"frame {frames[verified].index}, the first verified")
+    right = PoseTracker(model_of_exact)
+    right.update(frames[0], frames[0].T_camera_object)
+    assert right.limits_source == "the first frame" and right.calibration_refused is None
+
+
 def test_tracked_motion_keeps_the_recorded_pose_unless_the_refinement_is_tracked(noisy_pair, monkeypatch):
     import accumcli.pipeline as pipeline
     from accumcli.track import PoseEstimate

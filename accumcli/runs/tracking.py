@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass, field
 
@@ -19,6 +20,8 @@ from ..tum import write_poses_tum
 from .base import FrameRange, Progress, RecordingOptions, no_progress, nothing_done
 from .frame_logs import rerun_log
 
+log = logging.getLogger("accumcli")
+
 
 @dataclass
 class TrackingResult:
@@ -29,6 +32,7 @@ class TrackingResult:
     seconds: float = 0.0
     outputs: list = field(default_factory=list)
     params: TrackParams | None = None      # the limits used (calibrated on the first frame: ``track.calibrated``)
+    limits_source: str = "the first frame"  # where the limits come from (``PoseTracker.limits_source``)
 
     @property
     def frames(self) -> int:
@@ -89,6 +93,9 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
                 observe = (lambda f=frame: extract_frame(f, extract_params, rec.camera_frame,
                                                          gradients=shared).segments) if reacquire else None
                 estimate = tracker.update(frame, guess, observe, gradients=shared)
+                if len(times) == 0 and tracker.calibration_refused:
+                    log.warning("%s: frame %d: %s; check --init or the recorded pose", recording, frame.index,
+                                tracker.calibration_refused)
                 times.append(frame.timestamp_ns)
                 poses.append(estimate.T_camera_object)
                 status.append(estimate.status)
@@ -110,4 +117,5 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
                                  child_frame_id=poses_child_frame or f"{rec.object_frame}_tracked")
             else:
                 write_poses(files.open(path), track)
-    return TrackingResult(track, time.perf_counter() - t0, [str(p) for p in (*outputs, rrd) if p], tracker.params)
+    return TrackingResult(track, time.perf_counter() - t0, [str(p) for p in (*outputs, rrd) if p], tracker.params,
+                          tracker.limits_source)
