@@ -202,7 +202,8 @@ def info(recording, options, as_json):
               "rate, offset in time.")
 @click.option("--pose-noise", default="0,0", metavar="DEG,MM", show_default=True,
               callback=library_value(lambda text: number_pair(text, ",", "DEG,MM such as 1.5,4")),
-              help="RMS rotation (degrees) and translation (mm) noise on the recorded gripper poses.")
+              help="RMS rotation (degrees) and translation (mm) noise on the recorded gripper poses (with "
+                   "--tf-tree on its /tf samples, three per frame: at the image times about 0.75 of it).")
 @click.option("--encoding", type=click.Choice(["png", "jpeg", "mono8"]), default="png", show_default=True)
 def simulate(output, count, size, scene, shape, seed, size_mm, distance, contrast, blur, noise, illumination,
              background, clutter, raw, tf_tree, pose_noise, encoding):

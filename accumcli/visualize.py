@@ -216,18 +216,24 @@ class RerunLog:
         self.model(model)
         self.scalars({k: row[k] for k in ACCUMULATE_STATS if k in row})
 
-    def recording_frame(self, frame, models: dict, T_camera_object: np.ndarray | None) -> None:
+    def recording_frame(self, frame, models: dict, T_camera_object: np.ndarray | None, source: str = "recorded") -> None:
         """One frame of ``accum view`` on a recording: world = left camera frame; each model
-        (name -> Segments) placed at the frame's object pose, if it has one."""
+        (name -> Segments) placed at the frame's object pose on ``world/model/<name>`` (so the left
+        image shows it too), or cleared where the frame has none; ``source``, where the pose comes
+        from (a poses file's status and reason), on ``pose_source``."""
         self.set_frame(frame.index, frame.timestamp_ns)
         self.camera(frame.intrinsics, np.eye(4))
         self.images(frame)
-        if T_camera_object is not None:
-            for name, model in models.items():
-                self.model(model, T_camera_object, f"world/{name}")
-            self.rec.log("world/object", rr.Transform3D(translation=T_camera_object[:3, 3],
-                                                        mat3x3=T_camera_object[:3, :3]),
-                         rr.TransformAxes3D(0.05))
+        self.rec.log("pose_source", rr.TextLog(source, level="INFO" if T_camera_object is not None else "WARN"))
+        if T_camera_object is None:
+            self.rec.log("world/model", rr.Clear(recursive=True))
+            self.rec.log("world/object", rr.Clear(recursive=False))
+            return
+        for name, model in models.items():
+            self.model(model, T_camera_object, f"world/model/{name}")
+        self.rec.log("world/object", rr.Transform3D(translation=T_camera_object[:3, 3],
+                                                    mat3x3=T_camera_object[:3, :3]),
+                     rr.TransformAxes3D(0.05))
 
     def frame_segments(self, index: int, timestamp_ns: int, segments) -> None:
         """One line of a frames file: its 3D segments in world = the left camera frame."""

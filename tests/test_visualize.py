@@ -235,3 +235,35 @@ def test_spawn_failure_is_one_line(monkeypatch, tmp_path):
     with pytest.raises(AccumError, match=r"^cannot start the Rerun viewer \(RuntimeError: viewer exited\); use --rrd$"):
         RerunLog("accum test", spawn=True)
     assert calls == [str(viewer)]
+
+
+def test_view_shows_a_trackers_failure_and_every_model(small_recording, tmp_path):
+    """A poses file's lost frame clears the model (not the recording's pose in its place) and says
+    why on pose_source; the trajectory has one point per placed frame; two models named alike both show."""
+    import json
+    import shutil
+
+    from accumcli.runs import accumulate_recording, view
+
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    accumulate_recording(small_recording, [str(tmp_path / "a" / "model.json")])
+    shutil.copy(tmp_path / "a" / "model.json", tmp_path / "b" / "model.json")
+    truth = json.loads(open(small_recording.replace(".mcap", ".truth.json")).read())
+    poses = [{**p, "status": "tracked"} for p in truth["poses"][:6]]
+    poses[2] = {"timestamp_ns": poses[2]["timestamp_ns"], "translation": None, "rotation_xyzw": None,
+                "status": "lost", "reason": "coverage 0.10 in both images (needs 0.45)"}
+    track = tmp_path / "poses.json"
+    track.write_text(json.dumps({"format": "accum.poses/1", "parent_frame_id": "camera_left",
+                                 "child_frame_id": "gripper", "poses": poses}))
+    rrd = tmp_path / "v.rrd"
+    view([small_recording, str(tmp_path / "a" / "model.json"), str(tmp_path / "b" / "model.json"), str(track)],
+         rrd=str(rrd))
+    paths, frames = read_rrd(str(rrd))
+    assert {"world/model/model/accepted", "world/model/model_2/accepted"} <= paths
+    sources = [row[0] for row in rrd_column(str(rrd), "pose_source", "TextLog:text")]
+    assert sources[:3] == ["poses.json: tracked", "poses.json: tracked",
+                           "poses.json: lost (coverage 0.10 in both images (needs 0.45))"]
+    assert sources[6:] == ["recorded"] * (frames - 6)   # beyond the poses file: the recording's poses
+    strip = rrd_column(str(rrd), "world/trajectory", "LineStrips3D:strips")[-1][0]
+    assert len(strip) == frames - 1   # every frame but the lost one, once

@@ -37,7 +37,7 @@ class ViewInputs:
                     raise InputError(f"{path}: give at most one recording (already {inputs.recording})")
                 inputs.recording = str(path)
             elif kind == "model":
-                inputs.models[Path(path).stem.replace(".", "_")] = read_model(path)
+                inputs.models[inputs._name(Path(path).stem.replace(".", "_"))] = read_model(path)
             elif kind == "truth":
                 truth = read_truth(path)
                 direction = truth.b - truth.a
@@ -54,22 +54,38 @@ class ViewInputs:
                 raise InputError(f"{path}: accum view cannot show a {kind} file")
         return inputs
 
+    def _name(self, stem: str) -> str:
+        """``stem``, or ``stem_2``, ``stem_3``... when a model of that name is shown already (two
+        out/*/model.json would otherwise be one entity, the second hiding the first)."""
+        name, k = stem, 1
+        while name in self.models:
+            k += 1
+            name = f"{stem}_{k}"
+        return name
+
     def check_tracks(self, span_ns, tolerance_ns: int, recording: str) -> None:
         """AccumError when a poses file's times lie outside the recording's (``span_ns``): it would
         place nothing, and the recording's own poses would be shown instead without a word."""
         for track, path in zip(self.tracks, self.track_paths):
             check_same_time(track.times_ns, span_ns, tolerance_ns, path, recording)
 
-    def pose_at(self, t_ns: int, recorded: np.ndarray | None, tolerance_ns: int) -> np.ndarray | None:
-        """The object's pose at ``t_ns``: from the first poses file that has a finite one within the
-        tolerance, else ``recorded``."""
-        for track in self.tracks:
+    def pose_at(self, t_ns: int, recorded: np.ndarray | None, tolerance_ns: int) -> tuple[np.ndarray | None, str]:
+        """The object's pose at ``t_ns`` and where it comes from: the first poses file with an entry
+        within the tolerance decides (its pose where that entry is 'tracked', or has no status; else
+        no pose, and its status and reason: a tracker's failure is shown as one, not hidden behind
+        the recording's pose); without such an entry, ``recorded`` ('recorded')."""
+        for track, path in zip(self.tracks, self.track_paths):
             if not len(track.times_ns):
                 continue
             i = int(np.argmin(np.abs(track.times_ns - t_ns)))
-            if abs(int(track.times_ns[i]) - t_ns) <= tolerance_ns and np.isfinite(track.poses[i]).all():
-                return track.poses[i]
-        return recorded
+            if abs(int(track.times_ns[i]) - t_ns) > tolerance_ns:
+                continue
+            status = track.status[i] if track.status else "tracked"
+            if status == "tracked" and np.isfinite(track.poses[i]).all():
+                return track.poses[i], f"{Path(path).name}: tracked"
+            reason = track.extra[i].get("reason", "") if track.extra else ""
+            return None, f"{Path(path).name}: {status}" + (f" ({reason})" if reason else "")
+        return recorded, "recorded"
 
 
 def view(paths, *, rrd=None, spawn: bool = False, connect: str | None = None, png=None,
@@ -77,7 +93,9 @@ def view(paths, *, rrd=None, spawn: bool = False, connect: str | None = None, pn
          frames: FrameRange = FrameRange(), progress: Progress = no_progress) -> list[str]:
     """Show ``paths`` in Rerun (exactly one of ``rrd``, ``spawn``, ``connect``) and/or draw ``png``.
     With a recording, world is the left camera frame and each model is placed at the object's pose
-    in every frame (a poses file's if given, else the recording's). Returns the files written."""
+    in every frame: a poses file's where it has that frame (none where that frame is not 'tracked':
+    the tracker's status and reason are logged on ``pose_source``), else the recording's. Returns the
+    files written."""
     if sum(map(bool, (rrd, spawn, connect))) > 1:
         raise InputError("choose one of --rrd, --spawn and --connect")
     if not (rrd or spawn or connect or png):
@@ -104,17 +122,17 @@ def _log_to_rerun(inputs: ViewInputs, rrd, spawn, connect, options, frames, prog
             total = frames.check(rec)
             inputs.check_tracks(rec.time_span_ns, options.tolerance_ns, inputs.recording)
             for done, frame in enumerate(rec.frames(frames.start, frames.stop), 1):
-                T = inputs.pose_at(frame.timestamp_ns, frame.T_camera_object, options.tolerance_ns)
-                viz.recording_frame(frame, inputs.models, T)
+                T, source = inputs.pose_at(frame.timestamp_ns, frame.T_camera_object, options.tolerance_ns)
+                viz.recording_frame(frame, inputs.models, T, source)
                 if T is not None:
                     positions.append(T[:3, 3])
                 progress(done, total)
     else:
         for name, model in inputs.models.items():
-            viz.model(model, np.eye(4), f"world/{name}")
-    for track in inputs.tracks:
-        ok = np.isfinite(track.poses).all(axis=(1, 2))
-        positions.extend(track.poses[ok, :3, 3])
+            viz.model(model, np.eye(4), f"world/model/{name}")
+        for track in inputs.tracks:   # without a recording, the poses files' own positions
+            ok = np.isfinite(track.poses).all(axis=(1, 2))
+            positions.extend(track.poses[ok, :3, 3])
     if positions:
         viz.trajectory(np.array(positions))
     for path in inputs.frames_files:
@@ -138,9 +156,10 @@ def _draw_picture(inputs: ViewInputs, png, png_frame, options) -> None:
         inputs.check_tracks(rec.time_span_ns, options.tolerance_ns, inputs.recording)
         wanted = png_frame if png_frame is not None else rec.frame_count_hint // 2
         for frame in rec.frames(wanted, wanted + 1):
-            T = inputs.pose_at(frame.timestamp_ns, frame.T_camera_object, options.tolerance_ns)
+            T, source = inputs.pose_at(frame.timestamp_ns, frame.T_camera_object, options.tolerance_ns)
             if T is None:
-                raise AccumError(f"{inputs.recording}: frame {wanted} has no pose to place the model")
+                why = "" if source == "recorded" else f" ({source})"
+                raise AccumError(f"{inputs.recording}: frame {wanted} has no pose to place the model{why}")
             write_png(png, render_frame_panel(frame, extract_frame(frame), named[0], T))
             return
         raise AccumError(f"{inputs.recording}: no frame {wanted} (the recording has {rec.frame_count_hint})")
