@@ -62,7 +62,7 @@ def test_help_examples_run_as_written(workspace, monkeypatch):
             "stats/pruned"} <= accumulate_paths
     assert accumulate_frames == 36
     view_paths, view_frames = read_rrd(workspace / "out" / "view.rrd")
-    assert {"world/camera", "world/camera/image", "images/right", "world/model/accepted",
+    assert {"world/camera", "world/camera/image", "images/right", "world/model/model/accepted",
             "world/trajectory"} <= view_paths
     assert view_frames == 36
     assert (workspace / "out" / "model.png").stat().st_size > 5000
