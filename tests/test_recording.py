@@ -106,6 +106,22 @@ def test_transform_tree_chain_and_interpolation():
     assert tree.path("camera", "nowhere") is None
 
 
+def test_a_gap_in_the_transform_stream_is_not_interpolated():
+    tree = TransformTree()
+    period = 33_000_000                      # 30 Hz, silent from 1.0 s to 2.2 s
+    times = [k * period for k in range(31)] + [2_200_000_000 + k * period for k in range(30)]
+    for t in times:
+        tree.add("camera", "gripper", t, [0.0, 0.0, 0.5 + t * 1e-10], [0, 0, 0, 1])
+    assert abs(tree.lookup("camera", "gripper", 500_000_000)[2, 3] - 0.55) < 1e-9      # between neighbours
+    with pytest.raises(Exception, match=r"falls in a gap of the transform samples \(\[0.990, 2.200\] s, "
+                                        r"their median spacing 0.033 s\)"):
+        tree.lookup("camera", "gripper", 1_600_000_000)
+    slow = TransformTree()                    # a slow stream is no gap: 5 Hz, one sample missing
+    for t in [0, 200_000_000, 600_000_000, 800_000_000]:
+        slow.add("camera", "gripper", t, [0.0, 0.0, 0.5], [0, 0, 0, 1])
+    assert slow.lookup("camera", "gripper", 400_000_000)[2, 3] == 0.5
+
+
 @pytest.mark.parametrize("encoding", ["mono8", "rgb8", "bgr8", "mono16", "png", "jpeg"])
 def test_image_decoding(encoding):
     grey = helpers.image(3)

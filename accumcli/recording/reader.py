@@ -560,7 +560,7 @@ class Recording:
                 self.pose_at(t_ns)
                 info.frames_with_pose += 1
             except PoseUnavailable as e:
-                reason = re.sub(r"time -?[0-9.]+ s is ", "", str(e))   # one reason for all the frames it holds for
+                reason = re.sub(r"time -?[0-9.]+ s (is )?", "", str(e))   # one reason for all the frames it holds for
                 problems[reason] = problems.get(reason, 0) + 1
         info.pose_problems = sorted(problems.items())
         return info

@@ -16,6 +16,10 @@ Defined behaviour for odd input:
   ``PoseUnavailable`` instead of silently bridging it. Quaternions are
   normalised without overflow (any finite non-zero size is fine).
 - Times are integer nanoseconds anywhere in the int64 range (negative too).
+- A query between two samples further apart than ``GAP_FACTOR`` times the pair's median sample
+  spacing (and ``MIN_GAP_NS``) is refused: the transform stream had a gap there, and interpolating
+  across it (a robot turning the object 10 degrees a frame, /tf silent for 1.2 s) gave a model of
+  precision 0.70 instead of 0.98 without a word.
 - A cycle, or a frame with two parents, is not an error: ``path`` takes the
   shortest chain of edges (the first found on ties); ``ambiguous_frames`` names
   the frames with more than one parent so the reader can warn.
@@ -32,6 +36,8 @@ from ..errors import PoseUnavailable
 from ..geometry import interpolate, invert, transform_from_quat
 
 MAX_TRANSLATION_M = 1e4
+GAP_FACTOR = 4.0           # samples further apart than this many median spacings: a gap, not interpolated
+MIN_GAP_NS = 100_000_000   # ... and at least this far apart (a slow /tf of a slow robot is no gap)
 
 
 def sample_problem(translation, quat_xyzw) -> str | None:
@@ -83,6 +89,19 @@ class TransformSamples:
     valid: np.ndarray
     static: bool
 
+    @property
+    def spacing_ns(self) -> float:
+        """The median time between consecutive samples, ns (inf with fewer than two)."""
+        if "_spacing" not in self.__dict__:
+            steps = np.diff(self.times_ns)
+            self.__dict__["_spacing"] = float(np.median(steps)) if len(steps) else float("inf")
+        return self.__dict__["_spacing"]
+
+    @property
+    def gap_ns(self) -> float:
+        """Samples further apart than this are a gap in the stream (module docstring)."""
+        return max(GAP_FACTOR * self.spacing_ns, MIN_GAP_NS)
+
     def at(self, t_ns: int, tolerance_ns: int) -> np.ndarray:
         """``T_parent_child`` at ``t_ns``; raises ``PoseUnavailable``."""
         if self.static:
@@ -102,6 +121,10 @@ class TransformSamples:
             lo = hi
         else:
             lo, hi = max(hi - 1, 0), min(hi, len(t) - 1)
+        if int(t[hi]) - int(t[lo]) > self.gap_ns:
+            raise PoseUnavailable(
+                f"{self.parent} -> {self.child}: time {t_ns * 1e-9:.3f} s falls in a gap of the transform samples "
+                f"([{t[lo] * 1e-9:.3f}, {t[hi] * 1e-9:.3f}] s, their median spacing {self.spacing_ns * 1e-9:.3f} s)")
         for i in {lo, hi}:
             if not self.valid[i]:
                 raise PoseUnavailable(f"{self.parent} -> {self.child}: the sample at {t[i] * 1e-9:.3f} s has an "
