@@ -106,6 +106,38 @@ def test_transform_tree_chain_and_interpolation():
     assert tree.path("camera", "nowhere") is None
 
 
+def test_image_rect_topics_are_not_rectified_again(tmp_path, caplog):
+    """ROS's image_rect beside the raw camera's camera_info (D and R not identity): the images are
+    used as they are, with P; any other topic name is rectified with the calibration."""
+    import dataclasses
+
+    from accumcli.recording import Topics
+    from accumcli.recording.calibration import StereoRectifier
+    from accumcli.recording.reader import _is_rect_topic
+
+    from . import helpers
+
+    raw = [dataclasses.replace(helpers.calibration(side), D=np.array([0.1, 0, 0, 0, 0.0])) for side in ("left", "right")]
+    left, right = helpers.image(1), helpers.image(2)
+    as_given = StereoRectifier(*raw, images_rectified=True).rectify(left, right)
+    assert as_given[0] is left and as_given[1] is right
+    assert not np.array_equal(StereoRectifier(*raw).rectify(left, right)[0], left)
+    assert _is_rect_topic("/cam/left/image_rect") and _is_rect_topic("/cam/left/image_rect_color/compressed")
+    assert not _is_rect_topic("/cam/left/image_raw") and not _is_rect_topic("/stereo/left/image")
+    path = tmp_path / "rect.mcap"
+    with RecordingWriter(path) as w:
+        for side, cal in zip(("left", "right"), raw):
+            w.calibration(f"/cam/{side}/camera_info", cal, helpers.T0)
+            w.image(f"/cam/{side}/image_rect", helpers.image(0), helpers.T0, f"camera_{side}", "png")
+        w.raw_transform("camera_left", "gripper", (0.0, 0.0, 0.5), (0.0, 0.0, 0.0, 1.0), helpers.T0)
+    topics = Topics(left_image="/cam/left/image_rect", right_image="/cam/right/image_rect",
+                    left_calibration="/cam/left/camera_info", right_calibration="/cam/right/camera_info")
+    with caplog.at_level("WARNING", logger="accumcli"), Recording(path, topics) as rec:
+        frame = next(rec.frames())
+    assert np.array_equal(frame.left, helpers.image(0))
+    assert "is a rectified image topic (ROS's image_rect): its images are used as they are" in caplog.text
+
+
 def test_a_gap_in_the_transform_stream_is_not_interpolated():
     tree = TransformTree()
     period = 33_000_000                      # 30 Hz, silent from 1.0 s to 2.2 s

@@ -133,7 +133,9 @@ def check_calibration(cal: CameraCalibration, side: str) -> None:
 class StereoRectifier:
     """Rectified intrinsics and (if needed) remap tables for one left/right calibration."""
 
-    def __init__(self, left: CameraCalibration, right: CameraCalibration):
+    def __init__(self, left: CameraCalibration, right: CameraCalibration, images_rectified: bool = False):
+        """``images_rectified``: the images are rectified already whatever the calibration says (ROS's
+        ``image_rect`` beside the raw camera's ``camera_info``): P alone describes them."""
         for side, cal in (("left", left), ("right", right)):
             check_calibration(cal, side)
         if (left.width, left.height) != (right.width, right.height):
@@ -153,7 +155,7 @@ class StereoRectifier:
         self.intrinsics = StereoIntrinsics(
             fx=float(P_left[0, 0]), fy=float(P_left[1, 1]), cx=float(P_left[0, 2]), cy=float(P_left[1, 2]),
             baseline=float(baseline), width=int(left.width), height=int(left.height))
-        self.rectified_input = left.is_rectified and right.is_rectified
+        self.rectified_input = images_rectified or (left.is_rectified and right.is_rectified)
         self._maps = None if self.rectified_input else [
             cv2.initUndistortRectifyMap(c.K, c.D, c.R, c.P[:, :3], (c.width, c.height), cv2.CV_16SC2)
             for c in (left, right)]
