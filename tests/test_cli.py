@@ -52,6 +52,27 @@ def test_renamed_foxglove_topics_are_proposed(tmp_path):
             "--right-calibration-topic /cam/right/calibration") in result.output
 
 
+def test_the_images_frame_is_proposed_and_a_different_camera_frame_warned_of(tmp_path):
+    from accumcli.recording import RecordingWriter
+
+    from . import helpers
+
+    path = tmp_path / "optical.mcap"
+    with RecordingWriter(path) as w:
+        for side in ("left", "right"):
+            w.calibration(f"/stereo/{side}/calibration", helpers.calibration(side), helpers.T0)
+            w.image(f"/stereo/{side}/image", helpers.image(0), helpers.T0, f"cam_{side}_optical", "png")
+        w.raw_transform("cam_left_optical", "gripper", (0.0, 0.0, 0.5), (0.0, 0.0, 0.0, 1.0), helpers.T0)
+        w.raw_transform("cam_left_optical", "cam_right_optical", (0.08, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), helpers.T0)
+    result = run("accumulate", path, "-o", tmp_path / "m.json")
+    assert result.exit_code == 1
+    assert result.output.strip().splitlines()[-1].endswith(
+        "the images' frame is 'cam_left_optical': try --camera-frame cam_left_optical")
+    wrong = run("info", path, "--camera-frame", "cam_right_optical")
+    assert ("the left images are in frame 'cam_left_optical' (their frame_id), poses are looked up for "
+            "'cam_right_optical'") in wrong.output
+
+
 def test_info_reports_missing_object_frame(tmp_path):
     path, _ = broken_files(tmp_path)["no tf"]
     result = run("info", path)

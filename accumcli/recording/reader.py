@@ -256,6 +256,7 @@ class Recording:
         self._index()
         self._check_topics(require_pose)
         self._check_calibrations()
+        self._check_image_frame()
         if require_pose:
             self._check_pose_path()
         log.info("%s: %d stereo frames, %d calibration message(s), transform frames: %s", self.path,
@@ -359,6 +360,7 @@ class Recording:
         sides = {t.left_calibration: "left", t.right_calibration: "right"}
         self.frame_count_hint, unpaired = 0, {"count": 0}
         self.time_span_ns: tuple[int, int] | None = None
+        self.image_frame_id = ""   # the left images' frame_id (the first one given)
 
         def count_unpaired(is_left, item):
             unpaired["count"] += 1
@@ -372,6 +374,8 @@ class Recording:
                     if refused:
                         raise self._fail(f"{topic}: {refused}")
                     t_ns = self._stamp(msg, log_time, warn, topic)
+                    if topic == t.left_image and not self.image_frame_id:
+                        self.image_frame_id = getattr(msg, "frame_id", "") or ""
                     if t_ns is not None:
                         self.frame_count_hint += len(pairing.add(topic, _PendingImage(t_ns, None)))
                         span = self.time_span_ns or (t_ns, t_ns)
@@ -473,7 +477,30 @@ class Recording:
         if self.tree.path(self.camera_frame, self.object_frame) is None:
             frames = ", ".join(sorted(self.tree.frames)) or "none"
             raise self._fail(f"no transform path from {self.camera_frame!r} to {self.object_frame!r} "
-                             f"(frames in the transform tree: {frames})")
+                             f"(frames in the transform tree: {frames}); {self.pose_path_hint()}")
+
+    def pose_path_hint(self) -> str:
+        """What to try when no transform path joins the camera and the object frame."""
+        frames = self.tree.frames
+        if not frames:
+            return f"the recording holds no transform (on {self.topics.tf} or {self.topics.tf_static})"
+        if self.camera_frame not in frames:
+            if self.image_frame_id in frames:
+                return f"the images' frame is {self.image_frame_id!r}: try --camera-frame {self.image_frame_id}"
+            return "choose the left camera's optical frame with --camera-frame"
+        if self.object_frame not in frames:
+            return "choose the object's frame with --object-frame"
+        return "the two frames are in separate transform trees"
+
+    def _check_image_frame(self) -> None:
+        """Warn when the left images name a frame of the transform tree other than the camera frame:
+        poses are looked up for the camera frame, so a wrong one (the right camera's, a body frame
+        instead of the optical one) gives a wrong model without any other sign."""
+        image, camera = self.image_frame_id, self.camera_frame
+        if image and image != camera and image in self.tree.frames and camera in self.tree.frames:
+            log.warning("%s: the left images are in frame %r (their frame_id), poses are looked up for %r "
+                        "(--camera-frame): if %r is the left camera's optical frame, give --camera-frame %s",
+                        self.path, image, camera, image, image)
 
     # -- streaming ----------------------------------------------------------------------
     def _pairs(self, warn: LimitedWarnings | None = None) -> Iterator[tuple[int, int, object, object]]:
