@@ -138,6 +138,25 @@ def test_image_rect_topics_are_not_rectified_again(tmp_path, caplog):
     assert "is a rectified image topic (ROS's image_rect): its images are used as they are" in caplog.text
 
 
+def test_images_without_a_stamp_are_read_at_their_log_time_with_a_warning(tmp_path, caplog):
+    from accumcli.recording.messages import image_to_msg
+
+    from . import helpers
+
+    path = tmp_path / "unstamped.mcap"
+    with RecordingWriter(path) as w:
+        for side in ("left", "right"):
+            w.calibration(f"/stereo/{side}/calibration", helpers.calibration(side), helpers.T0)
+        w.raw_transform("camera_left", "gripper", (0.0, 0.0, 0.5), (0.0, 0.0, 0.0, 1.0), helpers.T0)
+        for side in ("left", "right"):
+            msg = image_to_msg(helpers.image(0), helpers.T0, f"camera_{side}", "png")
+            msg.ClearField("timestamp")
+            w._writer.write_message(f"/stereo/{side}/image", msg, log_time=helpers.T0, publish_time=helpers.T0)
+    with caplog.at_level("WARNING", logger="accumcli"), Recording(path) as rec:
+        assert next(rec.frames()).timestamp_ns == helpers.T0
+    assert "1 image(s) on /stereo/left/image carry no time stamp (header.stamp zero): their log times" in caplog.text
+
+
 def test_a_gap_in_the_transform_stream_is_not_interpolated():
     tree = TransformTree()
     period = 33_000_000                      # 30 Hz, silent from 1.0 s to 2.2 s

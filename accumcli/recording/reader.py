@@ -358,7 +358,7 @@ class Recording:
         """First pass: calibrations and transforms, image pairing on timestamps, message counts."""
         t = self.topics
         sides = {t.left_calibration: "left", t.right_calibration: "right"}
-        self.frame_count_hint, unpaired = 0, {"count": 0}
+        self.frame_count_hint, unpaired, unstamped = 0, {"count": 0}, {}
         self.time_span_ns: tuple[int, int] | None = None
         self.image_frame_id = ""   # the left images' frame_id (the first one given)
 
@@ -374,6 +374,8 @@ class Recording:
                     if refused:
                         raise self._fail(f"{topic}: {refused}")
                     t_ns = self._stamp(msg, log_time, warn, topic)
+                    if not msg.HasField("timestamp"):
+                        unstamped[topic] = unstamped.get(topic, 0) + 1
                     if topic == t.left_image and not self.image_frame_id:
                         self.image_frame_id = getattr(msg, "frame_id", "") or ""
                     if t_ns is not None:
@@ -410,6 +412,10 @@ class Recording:
                     self.tree.add(tf.parent_frame_id, tf.child_frame_id, t_ns, translation, quat,
                                   static=topic == t.tf_static)
             pairing.finish()
+            for topic, count in sorted(unstamped.items()):
+                log.warning("%s: %d image(s) on %s carry no time stamp (header.stamp zero): their log times are "
+                            "used, which lag the capture by the recorder's delay, so their poses may not match "
+                            "them", self.path, count, topic)
             for child, parents in self.tree.ambiguous_frames().items():
                 warn("several parents", "%s: frame %r has several parents (%s) in the transform tree: lookups "
                      "take the shortest path", self.path, child, ", ".join(map(repr, parents)))
