@@ -189,6 +189,19 @@ def test_image_decoding(encoding):
     assert np.abs(decoded.astype(int) - grey).mean() < tolerance
 
 
+@pytest.mark.parametrize("bits, full_scale", [(10, 1023), (12, 4095), (16, 65535)])
+def test_sixteen_bit_images_are_scaled_by_the_bits_they_use(bits, full_scale):
+    from accumcli.recording.messages import sixteen_bit_full_scale
+
+    grey = helpers.image(3)
+    data = (grey.astype("<u2") << (bits - 8)) | ((1 << (bits - 8)) - 1)   # 10, 12 or 16 bits in mono16
+    msg = RawImage(width=grey.shape[1], height=grey.shape[0], encoding="mono16", step=data.strides[0],
+                   data=data.tobytes())
+    assert sixteen_bit_full_scale(msg) == full_scale
+    assert np.abs(decode_image(msg, full_scale=full_scale).astype(int) - grey).max() <= 1
+    assert sixteen_bit_full_scale(image_to_msg(grey, 0, "cam", "png")) is None
+
+
 def test_corrupt_frame_is_skipped_with_a_warning(tmp_path, caplog):
     path = helpers.write(tmp_path / "corrupt.mcap", n=5, corrupt_left=(2,))
     with caplog.at_level(logging.WARNING), Recording(path) as rec:

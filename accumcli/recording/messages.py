@@ -127,8 +127,21 @@ def image_encoding(msg) -> str:
     return msg.format if hasattr(msg, "format") else msg.encoding
 
 
-def decode_image(msg, expected_size: tuple[int, int] | None = None) -> np.ndarray:
-    """(H, W) uint8 grey image of a CompressedImage or RawImage; raises ``DecodeError``.
+def sixteen_bit_full_scale(msg) -> int | None:
+    """The full scale of a raw 16-bit image's data (2^b - 1, b the even number of bits from 10 to 16
+    its largest value needs), or None for other images. Why: many industrial drivers publish 10- or
+    12-bit data as mono16; scaled by 255/65535 a 12-bit image keeps 16 grey levels and its edges are
+    lost (completeness 0.09 instead of 0.91 on the sample)."""
+    if getattr(msg, "encoding", None) not in ("mono16", "16UC1") or not msg.data:
+        return None
+    largest = int(np.frombuffer(msg.data[:len(msg.data) // 2 * 2], "<u2").max())
+    bits = min(16, max(10, largest.bit_length() + largest.bit_length() % 2))
+    return (1 << bits) - 1
+
+
+def decode_image(msg, expected_size: tuple[int, int] | None = None, full_scale: int = 65535) -> np.ndarray:
+    """(H, W) uint8 grey image of a CompressedImage or RawImage; raises ``DecodeError``. 16-bit
+    images are scaled by 255 / ``full_scale`` (``sixteen_bit_full_scale``), saturating above it.
 
     The header's size is checked first, against the limits and ``expected_size``
     (width, height) if given, so a refused image is never allocated.
@@ -172,7 +185,7 @@ def decode_image(msg, expected_size: tuple[int, int] | None = None) -> np.ndarra
         image = image[:, :, 0] if image.shape[2] == 1 else cv2.cvtColor(
             image, cv2.COLOR_BGRA2GRAY if image.shape[2] == 4 else cv2.COLOR_BGR2GRAY)
     if image.dtype == np.uint16:
-        image = cv2.convertScaleAbs(image, alpha=255.0 / 65535.0)
+        image = cv2.convertScaleAbs(image, alpha=255.0 / full_scale)
     return np.ascontiguousarray(image, dtype=np.uint8)
 
 

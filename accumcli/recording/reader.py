@@ -84,6 +84,7 @@ from .messages import (
     calibration_from_msg,
     decode_image,
     image_encoding,
+    sixteen_bit_full_scale,
     stamp_ns,
 )
 from .tf_tree import TransformTree, sample_problem
@@ -250,6 +251,7 @@ class Recording:
         self._rectifiers: dict = {}
         self._warned_early_calibration = False
         self._warned_rect_topic = False
+        self._full_scale: int | None = None   # of 16-bit images (``messages.sixteen_bit_full_scale``)
         # ROS's image_rect (and image_rect_color) topics hold rectified images, beside the raw camera's
         # camera_info: rectifying them again with its D and R gave a model of precision 0.014
         self.images_rectified = all(_is_rect_topic(t) for t in (topics.left_image, topics.right_image))
@@ -573,7 +575,13 @@ class Recording:
                 rectifier = self.calibration_at(t_ns)
                 size = (rectifier.intrinsics.width, rectifier.intrinsics.height)
                 try:
-                    left, right = decode_image(left_msg, size), decode_image(right_msg, size)
+                    if self._full_scale is None:   # of 16-bit data: its bit depth, from the first frame
+                        self._full_scale = sixteen_bit_full_scale(left_msg) or 65535
+                        if self._full_scale < 65535:
+                            log.warning("%s: the 16-bit images use %d bits (the first frame's largest value "
+                                        "needs them): scaled by 255/%d, brighter values saturate", self.path,
+                                        self._full_scale.bit_length(), self._full_scale)
+                    left, right = (decode_image(m, size, self._full_scale) for m in (left_msg, right_msg))
                 except DecodeError as e:
                     warn("undecodable frame", "%s: %s: skipped", where, e)
                     continue
