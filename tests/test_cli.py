@@ -73,6 +73,27 @@ def test_the_images_frame_is_proposed_and_a_different_camera_frame_warned_of(tmp
             "'cam_right_optical'") in wrong.output
 
 
+def test_frames_that_cannot_be_decoded_are_named_when_nothing_is_left(tmp_path):
+    from accumcli.recording import RecordingWriter
+
+    from . import helpers
+
+    path = tmp_path / "big_calibration.mcap"
+    with RecordingWriter(path) as w:   # the calibration says 320x240, the images are 160x120
+        for side in ("left", "right"):
+            w.calibration(f"/stereo/{side}/calibration", helpers.calibration(side, 320, 240), helpers.T0)
+        for i in range(3):
+            t = helpers.T0 + i * helpers.PERIOD
+            w.raw_transform("camera_left", "gripper", (0.0, 0.0, 0.5), (0.0, 0.0, 0.0, 1.0), t)
+            for side in ("left", "right"):
+                w.image(f"/stereo/{side}/image", helpers.image(i), t, f"camera_{side}", "png")
+    result = run("accumulate", path, "-o", tmp_path / "m.json")
+    assert result.exit_code == 1
+    last = result.output.strip().splitlines()[-1]
+    assert "no frame has both images and a pose of 'gripper' in 'camera_left'" in last
+    assert "3 frame(s): cannot be decoded (" in last and "160x120" in last
+
+
 def test_info_reports_missing_object_frame(tmp_path):
     path, _ = broken_files(tmp_path)["no tf"]
     result = run("info", path)

@@ -252,6 +252,7 @@ class Recording:
         self._warned_early_calibration = False
         self._warned_rect_topic = False
         self._full_scale: int | None = None   # of 16-bit images (``messages.sixteen_bit_full_scale``)
+        self.undecodable: dict[str, int] = {}   # frames skipped while streaming: reason -> count
         # ROS's image_rect (and image_rect_color) topics hold rectified images, beside the raw camera's
         # camera_info: rectifying them again with its D and R gave a model of precision 0.014
         self.images_rectified = all(_is_rect_topic(t) for t in (topics.left_image, topics.right_image))
@@ -584,6 +585,8 @@ class Recording:
                     left, right = (decode_image(m, size, self._full_scale) for m in (left_msg, right_msg))
                 except DecodeError as e:
                     warn("undecodable frame", "%s: %s: skipped", where, e)
+                    reason = f"cannot be decoded ({e})"
+                    self.undecodable[reason] = self.undecodable.get(reason, 0) + 1
                     continue
                 left, right = rectifier.rectify(left, right)
                 try:

@@ -24,7 +24,7 @@ from ..pipeline import AccumulateParams, LineAccumulation
 from ..row_check import RowCheck
 from ..segments import Segments
 from ..surface import faces_of
-from .base import FrameRange, Progress, RecordingOptions, no_progress, nothing_done
+from .base import FrameRange, Progress, RecordingOptions, in_frames, no_progress, nothing_done
 from .checks import check_same_time, check_truth_matches
 from .frame_logs import rerun_log, scene_log
 from .parallel import extracted_frames, resolve_workers
@@ -144,8 +144,9 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
             store.close()
         result.frames = len(result.rows)
         if result.frames == 0:
-            raise nothing_done(recording, f"no frame in {frames} has a pose of {rec.object_frame!r} in "
-                                          f"{rec.camera_frame!r}; nothing was accumulated", result.skipped)
+            raise nothing_done(recording, f"no frame{in_frames(frames)} has both images and a pose of "
+                                          f"{rec.object_frame!r} in {rec.camera_frame!r}; nothing was accumulated",
+                               result.skipped, rec)
         result.model = acc.model()
         result.row_warning = rows.report(recording, params.extract.stereo.row_offset_px)
         result.refined_frames = sum(not np.allclose(T, np.eye(4)) for T in acc.T_recorded_model)

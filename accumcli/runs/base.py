@@ -89,7 +89,14 @@ class FrameRange:
         return n
 
 
-def nothing_done(path, what: str, skipped: dict[str, int] | None = None) -> AccumError:
-    """The error for a run that would produce nothing: which frames were skipped, and why."""
-    reasons = "; ".join(f"{n} frame(s): {why}" for why, n in (skipped or {}).items())
-    return AccumError(f"{path}: {what}" + (f" ({reasons})" if reasons else ""))
+def nothing_done(path, what: str, skipped: dict[str, int] | None = None, rec=None) -> AccumError:
+    """The error for a run that would produce nothing: which frames were skipped, and why (``skipped``,
+    and the frames the recording ``rec`` could not decode, first: they never reach a run)."""
+    reasons = {**(getattr(rec, "undecodable", None) or {}), **(skipped or {})}
+    listed = "; ".join(f"{n} frame(s): {why}" for why, n in reasons.items())
+    return AccumError(f"{path}: {what}" + (f" ({listed})" if listed else ""))
+
+
+def in_frames(frames: "FrameRange") -> str:
+    """' in frames START:STOP' for a chosen range, '' for all frames (error messages)."""
+    return "" if frames == FrameRange() else f" in frames {frames}"

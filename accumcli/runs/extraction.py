@@ -13,7 +13,7 @@ from ..lines2d import StageTimes
 from ..model_io import FramesWriter
 from ..outputs import OutputSet
 from ..row_check import RowCheck
-from .base import FrameRange, Progress, RecordingOptions, no_progress, nothing_done
+from .base import FrameRange, Progress, RecordingOptions, in_frames, no_progress, nothing_done
 from .frame_logs import rerun_log
 from .parallel import extracted_frames, resolve_workers
 
@@ -80,7 +80,7 @@ def extract_recording(recording, output, *, params: ExtractParams = ExtractParam
                     result.totals[key] += extraction.counts[key]
                 progress(result.frames, total)
             if result.frames == 0:
-                raise nothing_done(recording, f"no stereo frame could be read in frames {frames}")
+                raise nothing_done(recording, f"no stereo frame could be read{in_frames(frames)}", rec=rec)
     result.row_warning = rows.report(recording, params.stereo.row_offset_px)
     result.seconds = time.perf_counter() - t0
     return result

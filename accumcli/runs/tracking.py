@@ -17,7 +17,7 @@ from ..outputs import OutputSet
 from ..segments import Segments
 from ..track import PoseTracker, TrackParams
 from ..tum import write_poses_tum
-from .base import FrameRange, Progress, RecordingOptions, no_progress, nothing_done
+from .base import FrameRange, Progress, RecordingOptions, in_frames, no_progress, nothing_done
 from .frame_logs import rerun_log
 
 log = logging.getLogger("accumcli")
@@ -106,7 +106,7 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
                     viz.tracking(frame, model, estimate, trajectory)
                 progress(len(times), total)
         if not times:
-            raise nothing_done(recording, f"no stereo frame could be read in frames {frames}")
+            raise nothing_done(recording, f"no stereo frame could be read{in_frames(frames)}", rec=rec)
         track = PoseTrack(rec.camera_frame, rec.object_frame, np.array(times, np.int64),
                           np.array(poses).reshape(-1, 4, 4), status, extra)
         for path in outputs:
