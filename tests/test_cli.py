@@ -186,7 +186,7 @@ def test_no_frame_with_a_pose_is_an_error_not_an_empty_model(tmp_path):
     path = helpers.write(tmp_path / "late_tf.mcap", n=3, tf_times=[helpers.T0 + k * helpers.PERIOD for k in (10, 11, 12)])
     result = run("accumulate", path, "-o", tmp_path / "m.json")
     assert result.exit_code == 1 and not (tmp_path / "m.json").exists()
-    assert "no frame in 0: has a pose of 'gripper'" in result.output.strip().splitlines()[-1]
+    assert "no frame has both images and a pose of 'gripper'" in result.output.strip().splitlines()[-1]
 
 
 def test_frames_without_pose_are_skipped_with_a_warning(tmp_path):
