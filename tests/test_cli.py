@@ -94,6 +94,27 @@ def test_frames_that_cannot_be_decoded_are_named_when_nothing_is_left(tmp_path):
     assert "3 frame(s): cannot be decoded (" in last and "160x120" in last
 
 
+def test_info_proposes_a_pairing_tolerance_for_unsynchronised_cameras(tmp_path):
+    from accumcli.recording import RecordingWriter
+
+    from . import helpers
+
+    path = tmp_path / "jitter.mcap"
+    with RecordingWriter(path) as w:   # the right image 0 to 9 ms after the left
+        for side in ("left", "right"):
+            w.calibration(f"/stereo/{side}/calibration", helpers.calibration(side), helpers.T0)
+        for i in range(20):
+            t = helpers.T0 + i * helpers.PERIOD
+            w.raw_transform("camera_left", "gripper", (0.0, 0.0, 0.5), (0.0, 0.0, 0.0, 1.0), t)
+            w.image("/stereo/left/image", helpers.image(i), t, "camera_left", "png")
+            w.image("/stereo/right/image", helpers.image(i), t + (i % 10) * 1_000_000, "camera_right", "png")
+    result = run("info", path)
+    hint = next(line for line in result.output.splitlines() if line.startswith("pairing"))
+    tolerance = int(hint.rsplit(" ", 1)[1])
+    assert "found no partner within the pairing tolerance" in hint and 9 <= tolerance <= 12
+    assert "20 stereo frames" in run("info", path, "--tolerance-ms", tolerance).output
+
+
 def test_info_reports_missing_object_frame(tmp_path):
     path, _ = broken_files(tmp_path)["no tf"]
     result = run("info", path)
