@@ -106,7 +106,8 @@ def check_calibration(cal: CameraCalibration, side: str) -> None:
         raise RecordingError(f"{side} calibration: {problem}")
     if cal.distortion_model not in SUPPORTED_DISTORTION:
         raise RecordingError(f"{side} calibration: distortion model {cal.distortion_model!r} is not supported "
-                             f"(expected plumb_bob or rational_polynomial)")
+                             f"(expected plumb_bob or rational_polynomial); rectify the images first (e.g. "
+                             "image_proc) and give their rectified topics with a distortion-free calibration")
     if len(cal.D) not in DISTORTION_LENGTHS:
         raise RecordingError(f"{side} calibration: D has {len(cal.D)} coefficients "
                              f"(expected {', '.join(map(str, DISTORTION_LENGTHS))})")
@@ -143,11 +144,14 @@ class StereoRectifier:
                                  f"{right.width}x{right.height}")
         P_left, P_right = left.P, right.P
         if not np.allclose(P_left[:, :3], P_right[:, :3], rtol=1e-6, atol=1e-6):
-            raise RecordingError("left and right P differ in their 3x3 part: the pair is not rectified to one camera")
+            raise RecordingError("left and right P differ in their 3x3 part: the pair is not rectified to one camera "
+                                 "(calibrate the two cameras as a stereo pair, e.g. OpenCV's stereoRectify or ROS's "
+                                 "camera_calibration with both cameras)")
         baseline = -P_right[0, 3] / P_right[0, 0] + P_left[0, 3] / P_left[0, 0]
         if not np.isfinite(baseline) or baseline == 0:
             raise RecordingError(f"stereo calibration: the baseline is {baseline:g} m (expected finite and "
-                                 f"positive, from the right P[0,3] = -fx * baseline, found {P_right[0, 3]:g})")
+                                 f"positive, from the right P[0,3] = -fx * baseline, found {P_right[0, 3]:g}): "
+                                 "were the cameras calibrated one by one? Calibrate them as a stereo pair")
         if baseline < 0:
             raise RecordingError(
                 f"right calibration: P[0,3] = {P_right[0, 3]:g} has the wrong sign (expected -fx * baseline < 0, "
