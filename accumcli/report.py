@@ -29,6 +29,8 @@ def info_lines(summary, object_frame: str, camera_frame: str) -> list[str]:
         lines += [f"images       {intr.width}x{intr.height} {summary.image_encoding}, {kind}",
                   f"calibration  fx {intr.fx:.2f} px, fy {intr.fy:.2f} px, cx {intr.cx:.2f}, cy {intr.cy:.2f}, "
                   f"baseline {intr.baseline * 1000:.2f} mm ({summary.calibrations} message(s))"]
+        if summary.size_problem:
+            lines.append(f"problem      {summary.size_problem}")
     lines.append(f"poses        {object_frame} in {camera_frame}: {summary.frames_with_pose}/{summary.stereo_frames}"
                  " frames")
     lines += [f"             {count} frame(s): {reason}" for reason, count in summary.pose_problems]

@@ -92,6 +92,8 @@ def test_frames_that_cannot_be_decoded_are_named_when_nothing_is_left(tmp_path):
     last = result.output.strip().splitlines()[-1]
     assert "no frame has both images and a pose of 'gripper' in 'camera_left'" in last
     assert "3 frame(s): cannot be decoded (" in last and "160x120" in last
+    info = run("info", path).output   # says so before any run
+    assert "problem      the images are 160x120, their calibration is for 320x240: every frame would be refused" in info
 
 
 def test_info_proposes_a_pairing_tolerance_for_unsynchronised_cameras(tmp_path):

@@ -84,6 +84,7 @@ from .messages import (
     calibration_from_msg,
     decode_image,
     image_encoding,
+    image_size,
     sixteen_bit_full_scale,
     stamp_ns,
 )
@@ -165,6 +166,7 @@ class RecordingInfo:
     tf_frames: list = field(default_factory=list)
     stereo_offset_ms: float | None = None
     lost_bytes: int = 0
+    size_problem: str | None = None   # the images' own size differs from their calibration's
 
 
 @dataclass
@@ -617,6 +619,14 @@ class Recording:
                 info.image_size = (rectifier.intrinsics.width, rectifier.intrinsics.height)
                 info.rectified_input = rectifier.rectified_input
                 info.distortion_model = self.calibrations["left"][0][1].distortion_model or "none"
+                try:
+                    declared = image_size(left_msg)
+                except DecodeError:
+                    declared = info.image_size
+                if declared != info.image_size:
+                    info.size_problem = (f"the images are {declared[0]}x{declared[1]}, their calibration is for "
+                                         f"{info.image_size[0]}x{info.image_size[1]}: every frame would be refused; "
+                                         "give the calibration of these images")
             try:
                 self.pose_at(t_ns)
                 info.frames_with_pose += 1
