@@ -101,6 +101,7 @@ TF_TYPES = {"foxglove.FrameTransform": FrameTransform, "foxglove.FrameTransforms
 ROS_TYPES = {"image": ros2.ROS_IMAGE_TYPES, "calibration": (ros2.ROS_CAMERA_INFO,), "tf": (ros2.ROS_TF,)}
 PROTOBUF_TYPES = {"image": IMAGE_TYPES, "calibration": CALIBRATION_TYPES, "tf": TF_TYPES}
 
+
 def _is_rect_topic(topic: str) -> bool:
     """A ROS image_proc rectified image topic: .../image_rect, .../image_rect_color (or /compressed of one)."""
     parts = [p for p in topic.split("/") if p]
