@@ -87,8 +87,10 @@ def score(row: Row, view_planes: bool = True) -> dict:
     (CACHE / "track_suite").mkdir(parents=True, exist_ok=True)
     model = accumulate_recording(row.model_path, options=RecordingOptions(object_frame=row.object_frame),
                                  frames=FrameRange(*row.model_frames), params=accumulate_params(view_planes)).model
-    # the wrong model's object frame is not the tracked recording's: start it where sim_box's recorded pose is
+    # the wrong model's object frame is not the tracked recording's: it stands for a model of another
+    # object in the same frame (track refuses a model of another frame), started at sim_box's recorded pose
     track_frame = "gripper" if row.truth is None else row.object_frame
+    model.frame_id = track_frame
     result = track_recording(model, row.track_path, options=RecordingOptions(object_frame=track_frame),
                              frames=FrameRange(*row.track_frames))
     track = result.track

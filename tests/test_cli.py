@@ -476,3 +476,32 @@ def test_an_option_that_would_do_nothing_is_an_error(small_recording, tmp_path, 
     result = run(*[a.format(**names) for a in args])
     assert result.exit_code == 1 and message in result.output.strip().splitlines()[-1], result.output
     assert not any(p.name in ("m.json", "v.png", "p.png") for p in tmp_path.iterdir())
+
+
+def test_library_runs_take_one_path_or_a_list_and_refuse_other_types(small_recording, tmp_path):
+    from accumcli.errors import InputError
+    from accumcli.runs import accumulate_recording, extract_recording, track_recording, view
+
+    model = tmp_path / "mdl.json"
+    assert accumulate_recording(small_recording, str(model), frames="0:2").outputs == [str(model)]   # not m, d, l...
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mdl.json"]
+    assert track_recording(str(model), small_recording, tmp_path / "p.json", frames="0:2").outputs == [str(tmp_path / "p.json")]
+    view(str(model), png=str(tmp_path / "m.png"))
+    for call, message in ((lambda: accumulate_recording(small_recording, 5), "outputs: expected a path or a list"),
+                          (lambda: track_recording({}, small_recording), "model: expected a model file's path"),
+                          (lambda: extract_recording(small_recording, ["a.jsonl", "b.jsonl"]), "expected one frames file"),
+                          (lambda: accumulate_recording(small_recording, frames=3), "frames: expected a FrameRange")):
+        with pytest.raises(InputError, match=message):
+            call()
+
+
+def test_track_refuses_a_model_of_another_object_frame(small_recording, tmp_path):
+    import json
+
+    model = tmp_path / "m.json"
+    assert run("accumulate", small_recording, "-o", model, "--frames", "0:2").exit_code == 0
+    doc = json.loads(model.read_text())
+    doc["frame_id"] = "board"
+    model.write_text(json.dumps(doc))
+    result = run("track", model, small_recording, "-o", tmp_path / "p.json")
+    assert result.exit_code == 1 and "the model is in frame 'board', the recording's object frame is 'gripper'" in result.output

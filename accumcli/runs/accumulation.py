@@ -24,7 +24,8 @@ from ..pipeline import AccumulateParams, LineAccumulation
 from ..row_check import RowCheck
 from ..segments import Segments
 from ..surface import faces_of
-from .base import FrameRange, Progress, RecordingOptions, in_frames, no_progress, nothing_done
+from .base import (FrameRange, Progress, RecordingOptions, frame_range, in_frames, no_progress, nothing_done,
+                   path_list)
 from .checks import check_same_time, check_truth_matches
 from .frame_logs import rerun_log, scene_log
 from .parallel import extracted_frames, resolve_workers
@@ -75,6 +76,7 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
     extracting the next frames while this one accumulates (``runs.parallel``; the same model bytes
     whatever the number; None: ``parallel.resolve_workers``).
     """
+    outputs, frames = path_list(outputs, "outputs"), frame_range(frames)
     if ply_all and not any(str(path).lower().endswith(".ply") for path in outputs):
         raise InputError("--all chooses what a .ply output holds, and no .ply output is given")
     files = OutputSet([*outputs, history, plot, rrd, png, panel], inputs=[recording, truth])

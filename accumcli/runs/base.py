@@ -10,6 +10,7 @@ call the same functions.
 from __future__ import annotations
 
 import logging
+import os
 import re
 from dataclasses import dataclass, field
 from typing import Callable
@@ -100,3 +101,28 @@ def nothing_done(path, what: str, skipped: dict[str, int] | None = None, rec=Non
 def in_frames(frames: "FrameRange") -> str:
     """' in frames START:STOP' for a chosen range, '' for all frames (error messages)."""
     return "" if frames == FrameRange() else f" in frames {frames}"
+
+
+def path_list(paths, what: str) -> list:
+    """The paths of one path (a ``str`` or ``os.PathLike``: one path, not its characters) or of an
+    iterable of them (None: none); ``InputError`` for anything else."""
+    if paths is None:
+        return []
+    if isinstance(paths, (str, os.PathLike)):
+        return [paths]
+    try:
+        items = list(paths)
+    except TypeError:
+        items = None
+    if items is None or not all(isinstance(p, (str, os.PathLike)) for p in items):
+        raise InputError(f"{what}: expected a path or a list of paths, found {type(paths).__name__}")
+    return items
+
+
+def frame_range(frames) -> FrameRange:
+    """``frames`` as a ``FrameRange`` (one, or its ``START:STOP`` text); ``InputError`` for anything else."""
+    if isinstance(frames, FrameRange):
+        return frames
+    if isinstance(frames, str):
+        return FrameRange.parse(frames)
+    raise InputError(f"frames: expected a FrameRange or 'START:STOP', found {type(frames).__name__}")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import os
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +14,7 @@ from ..funnel import funnel
 from ..model_io import check_kind, load_model_doc, read_frames, read_poses, read_truth, segments_from_dict
 from ..outputs import OutputSet
 from ..surface import faces_of, hidden_face, support_face_problem, surface_scores
-from .base import FrameRange
+from .base import FrameRange, frame_range
 from .checks import check_same_time, check_truth_matches, check_truth_times
 
 TIME_TOLERANCE_NS = 1_000_000
@@ -29,6 +30,9 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
     or one with no pose at the file's timestamps, is refused. A truth with ``faces`` also gives a
     model's precision judged by surface (``accumcli.surface``; ``support_face``: the face it stands on).
     ``plot``: a PNG of a frames file's figures frame by frame (``plots``)."""
+    frames = frame_range(frames)
+    if not isinstance(path, (str, os.PathLike)) or not isinstance(truth_path, (str, os.PathLike)):
+        raise InputError("evaluate_file: expected the paths of a model, frames or poses file and of a truth")
     truth = read_truth(truth_path)
     kind = check_kind(path, "model", "frames", "poses")
     if plot and kind != "frames":

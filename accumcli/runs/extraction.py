@@ -7,13 +7,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import InputError
 from ..extract import ExtractParams
 from ..geometry import quat_from_transform
 from ..lines2d import StageTimes
 from ..model_io import FramesWriter
 from ..outputs import OutputSet
 from ..row_check import RowCheck
-from .base import FrameRange, Progress, RecordingOptions, in_frames, no_progress, nothing_done
+from .base import FrameRange, Progress, RecordingOptions, frame_range, in_frames, no_progress, nothing_done, path_list
 from .frame_logs import rerun_log
 from .parallel import extracted_frames, resolve_workers
 
@@ -51,6 +52,10 @@ def extract_recording(recording, output, *, params: ExtractParams = ExtractParam
     recording. ``workers``: extracting processes (the same bytes whatever the number; None:
     ``parallel.resolve_workers``). Needs no
     object pose."""
+    given = path_list(output, "output")
+    if len(given) != 1:
+        raise InputError(f"output: expected one frames file, found {len(given)}")
+    output, frames = given[0], frame_range(frames)
     outputs = OutputSet([output, rrd], inputs=[recording])
     result = ExtractionResult(outputs=[p for p in (output, rrd) if p])
     t0 = time.perf_counter()

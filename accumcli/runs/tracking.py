@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import logging
+import os
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import AccumError
+from ..errors import AccumError, InputError
 from ..extract import ExtractParams, extract_frame
 from ..geometry import check_transform
 from ..lines2d import frame_gradients
@@ -17,7 +18,7 @@ from ..outputs import OutputSet
 from ..segments import Segments
 from ..track import PoseTracker, TrackParams
 from ..tum import write_poses_tum
-from .base import FrameRange, Progress, RecordingOptions, in_frames, no_progress, nothing_done
+from .base import FrameRange, Progress, RecordingOptions, frame_range, in_frames, no_progress, nothing_done, path_list
 from .frame_logs import rerun_log
 
 log = logging.getLogger("accumcli")
@@ -66,6 +67,9 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
     ``poses_topic``, child frame ``poses_child_frame``, default ``<object>_tracked``, so they sit
     beside the recording's own /tf in Foxglove).
     """
+    outputs, frames = path_list(outputs, "outputs"), frame_range(frames)
+    if not isinstance(model, (Segments, str, os.PathLike)):
+        raise InputError(f"model: expected a model file's path or Segments, found {type(model).__name__}")
     model_file = None if isinstance(model, Segments) else model
     if model_file is not None:
         model_path, model = model, read_model(model)
@@ -81,6 +85,10 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
     t0 = time.perf_counter()
     with options.open(recording, require_pose=init_pose is None) as rec, files:
         total = frames.check(rec)
+        if model.frame_id and model.frame_id != rec.object_frame:   # a model of another object (frame)
+            raise AccumError(f"{model_path}: the model is in frame {model.frame_id!r}, the recording's object "
+                             f"frame is {rec.object_frame!r}: give --object-frame {model.frame_id} if it is the "
+                             "same object, or the model of this one")
         with rerun_log(files, rrd, "track") as viz:
             for frame in rec.frames(frames.start, frames.stop):
                 guess = None

@@ -12,7 +12,7 @@ from ..errors import AccumError, InputError
 from ..model_io import check_kind, read_frames, read_model, read_poses, read_truth
 from ..outputs import OutputSet
 from ..segments import Segments
-from .base import FrameRange, Progress, RecordingOptions, no_progress
+from .base import FrameRange, Progress, RecordingOptions, frame_range, no_progress, path_list
 from .checks import check_same_time
 
 
@@ -96,6 +96,7 @@ def view(paths, *, rrd=None, spawn: bool = False, connect: str | None = None, pn
     in every frame: a poses file's where it has that frame (none where that frame is not 'tracked':
     the tracker's status and reason are logged on ``pose_source``), else the recording's. Returns the
     files written."""
+    paths, frames = path_list(paths, "paths"), frame_range(frames)
     if sum(map(bool, (rrd, spawn, connect))) > 1:
         raise InputError("choose one of --rrd, --spawn and --connect")
     if not (rrd or spawn or connect or png):
