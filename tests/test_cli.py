@@ -212,17 +212,32 @@ def test_no_frame_with_a_pose_is_an_error_not_an_empty_model(tmp_path):
     assert "no frame has both images and a pose of 'gripper'" in result.output.strip().splitlines()[-1]
 
 
-def test_frames_without_pose_are_skipped_with_a_warning(tmp_path):
-    from . import helpers
+def test_frames_without_pose_are_skipped_with_a_warning(small_recording, tmp_path):
+    from accumcli.recording import Recording, RecordingWriter
 
-    times = [helpers.T0 + i * helpers.PERIOD for i in range(3)]
-    path = helpers.write(tmp_path / "short_tf.mcap", n=5, tf_times=times)
+    path = tmp_path / "short_tf.mcap"   # the small recording's images, /tf only for its first 4 frames
+    with Recording(small_recording) as rec, RecordingWriter(path) as w:
+        for side in ("left", "right"):
+            w.calibration(f"/stereo/{side}/calibration", rec.calibrations[side][0][1], rec.calibrations[side][0][0])
+        for frame in rec.frames():
+            if frame.index < 4:
+                w.transform("camera_left", "gripper", frame.T_camera_object, frame.timestamp_ns)
+            w.image("/stereo/left/image", frame.left, frame.timestamp_ns, "camera_left", "png")
+            w.image("/stereo/right/image", frame.right, frame.timestamp_ns, "camera_right", "png")
     result = run("accumulate", path, "-o", tmp_path / "m.json")
     assert result.exit_code == 0, result.output
-    assert result.output.count("warning:") == 2 and "frame 3: no pose" in result.output
+    assert result.output.count("warning:") == 2 and "frame 4: no pose" in result.output
     assert "2 skipped without a pose" in result.output
+    empty = run("accumulate", helpers_empty(tmp_path), "-o", tmp_path / "e.json")   # noise images: no segment
+    assert empty.exit_code == 1 and "the model is empty: no 3D segment was extracted" in empty.output
     info = run("info", path)   # the reason, once for the frames it holds for
     assert "2 frame(s): camera_left -> gripper: outside the transform samples [" in info.output
+
+
+def helpers_empty(tmp_path):
+    from . import helpers
+
+    return helpers.write(tmp_path / "noise.mcap", n=3)
 
 
 @pytest.mark.parametrize("args, message", [

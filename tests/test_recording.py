@@ -157,6 +157,20 @@ def test_images_without_a_stamp_are_read_at_their_log_time_with_a_warning(tmp_pa
     assert "1 image(s) on /stereo/left/image carry no time stamp (header.stamp zero): their log times" in caplog.text
 
 
+def test_a_baseline_in_other_units_than_metres_is_warned_of(tmp_path, caplog):
+    from . import helpers
+
+    path = tmp_path / "mm.mcap"
+    with RecordingWriter(path) as w:   # the right P[0,3] from a baseline of 80 (mm) instead of 0.08 (m)
+        for side in ("left", "right"):
+            w.calibration(f"/stereo/{side}/calibration", helpers.calibration(side, baseline=80.0), helpers.T0)
+            w.image(f"/stereo/{side}/image", helpers.image(0), helpers.T0, f"camera_{side}", "png")
+        w.raw_transform("camera_left", "gripper", (0.0, 0.0, 0.5), (0.0, 0.0, 0.0, 1.0), helpers.T0)
+    with caplog.at_level("WARNING", logger="accumcli"), Recording(path) as rec:
+        next(rec.frames())
+    assert "the stereo baseline is 80 m: the right P[0,3] must be -fx times the baseline in metres" in caplog.text
+
+
 def test_a_gap_in_the_transform_stream_is_not_interpolated():
     tree = TransformTree()
     period = 33_000_000                      # 30 Hz, silent from 1.0 s to 2.2 s

@@ -561,6 +561,10 @@ class Recording:
                 self._rectifiers[key] = StereoRectifier(*chosen, images_rectified=self.images_rectified)
             except RecordingError as e:
                 raise self._fail(str(e)) from None
+            baseline = self._rectifiers[key].intrinsics.baseline
+            if not 0.005 <= baseline <= 2.0:   # a stereo rig's, in metres: P[0,3] in other units?
+                log.warning("%s: the stereo baseline is %.4g m: the right P[0,3] must be -fx times the baseline "
+                            "in metres (in other units every depth is off by that factor)", self.path, baseline)
         return self._rectifiers[key]
 
     def pose_at(self, t_ns: int) -> np.ndarray:

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import AccumError, InputError
 from ..evaluate import EdgeSamples, score_segments
 from ..lines2d import StageTimes
 from ..logs import LimitedWarnings
@@ -50,6 +50,7 @@ class AccumulationResult:
     refined_frames: int = 0
     seconds: float = 0.0
     outputs: list = field(default_factory=list)
+    distances_m: list = field(default_factory=list)   # the object's distance from the camera per frame, by its pose
 
     @property
     def accepted(self) -> int:
@@ -128,6 +129,7 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
                 step = acc.step(frame, frame.T_camera_object, extraction,
                                 T_corrected=None if poses is None else poses[frame.index])
                 rows.add(step.extraction, frame.intrinsics)
+                result.distances_m.append(float(np.linalg.norm(frame.T_camera_object[:3, 3])))
                 row = {"frame_index": frame.index, "timestamp_ns": frame.timestamp_ns, **step.stats.__dict__}
                 if step.tracking is not None:
                     row.update(tracking=step.tracking.status, residual_px=step.tracking.residual_px)
@@ -150,6 +152,10 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
                                           f"{rec.object_frame!r} in {rec.camera_frame!r}; nothing was accumulated",
                                result.skipped, rec)
         result.model = acc.model()
+        if len(result.model) == 0:   # an empty model is no result (calibration or images are wrong)
+            raise AccumError(f"{recording}: the model is empty: {_nothing_accepted(result)}")
+        if result.accepted == 0:     # nothing claimed: units or frames are likely wrong, or too few frames
+            log.warning("%s: the model accepted no segment: %s", recording, _nothing_accepted(result))
         result.row_warning = rows.report(recording, params.extract.stereo.row_offset_px)
         result.refined_frames = sum(not np.allclose(T, np.eye(4)) for T in acc.T_recorded_model)
         if edges is not None:   # the last row scored this very model
@@ -211,6 +217,20 @@ class ExtractionStore:
 
     def close(self) -> None:
         self.file.close()
+
+
+def _nothing_accepted(result: AccumulationResult) -> str:
+    """Why a model accepted no segment, as far as the run can tell, and what to check."""
+    if result.frames < 2:
+        return "one frame confirms no segment (a segment is accepted when a second frame sees it again); give more frames"
+    observed = sum(row.get("observed", 0) for row in result.rows) / result.frames
+    if observed == 0:
+        return (f"no 3D segment was extracted in {result.frames} frames: check the images (8 bits, or 16 with "
+                "their bit depth) and the calibration")
+    where = f", the object {np.median(result.distances_m):.3g} m from the camera by the poses"
+    return (f"{result.frames} frames gave {observed:.0f} 3D segments each but no model segment was seen again "
+            f"where the poses put it{where}: check that the poses are T_camera_object in metres and that "
+            f"they belong to these images (--object-frame, --camera-frame)")
 
 
 TRACKED_PASSES = 5   # ``tracked_poses``' four passes over the recording, then the accumulation itself
