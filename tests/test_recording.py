@@ -171,6 +171,31 @@ def test_a_baseline_in_other_units_than_metres_is_warned_of(tmp_path, caplog):
     assert "the stereo baseline is 80 m: the right P[0,3] must be -fx times the baseline in metres" in caplog.text
 
 
+def test_the_writer_refuses_what_it_would_write_wrongly(tmp_path):
+    from accumcli.errors import InputError
+    from accumcli.recording import CameraCalibration
+
+    from . import helpers
+
+    with RecordingWriter(tmp_path / "w.mcap") as w:
+        for call, message in (
+                (lambda: w.image("/i", None, helpers.T0, "c"), "found None \\(did the image load\\?\\)"),
+                (lambda: w.image("/i", helpers.image(0) / 255.0, helpers.T0, "c"), "uint8 image \\(8 bits"),
+                (lambda: w.image("/i", helpers.image(0), helpers.T0, "c", "jpg"), "encoding 'jpg': expected png"),
+                (lambda: w.transform("a", "b", np.eye(3), helpers.T0), "T a -> b"),
+                (lambda: w.transform("a", "b", np.diag([2.0, 2, 2, 1]), helpers.T0), "T a -> b"),
+                (lambda: w.image("/i", helpers.image(0), 1.75e18, "c"), "expected whole nanoseconds"),
+                (lambda: w.image("/i", helpers.image(0), -1, "c"), "expected whole nanoseconds")):
+            with pytest.raises(InputError, match=message):
+                call()
+        w.image("/i", helpers.image(0), np.int64(helpers.T0), "c")   # numpy integers are whole nanoseconds
+    listed = CameraCalibration(160, 120, np.eye(3).tolist(), [0, 0, 0, 0, 0], np.eye(3).tolist(),
+                               np.zeros((3, 4)).tolist(), "plumb_bob", "c")
+    assert listed.K.shape == (3, 3) and listed.D.dtype == float
+    with pytest.raises(InputError, match="P must be a 3x4 matrix"):
+        CameraCalibration(160, 120, np.eye(3), np.zeros(5), np.eye(3), np.zeros((3, 3)), "plumb_bob", "c")
+
+
 def test_a_gap_in_the_transform_stream_is_not_interpolated():
     tree = TransformTree()
     period = 33_000_000                      # 30 Hz, silent from 1.0 s to 2.2 s

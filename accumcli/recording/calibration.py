@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..errors import RecordingError
+from ..errors import InputError, RecordingError
 
 SUPPORTED_DISTORTION = {"plumb_bob", "rational_polynomial", ""}
 DISTORTION_LENGTHS = (0, 4, 5, 8, 12, 14)
@@ -52,6 +52,18 @@ class CameraCalibration:
     P: np.ndarray
     distortion_model: str
     frame_id: str
+
+    def __post_init__(self):
+        """K, D, R and P as float arrays of their shapes (given as lists too); ``InputError`` otherwise."""
+        for name, shape in (("K", (3, 3)), ("D", None), ("R", (3, 3)), ("P", (3, 4))):
+            try:
+                value = np.asarray(getattr(self, name), float)
+            except (TypeError, ValueError):
+                value = None
+            if value is None or (shape is not None and value.shape != shape) or (shape is None and value.ndim != 1):
+                raise InputError(f"calibration {self.frame_id!r}: {name} must be "
+                                 f"{'a ' + 'x'.join(map(str, shape)) + ' matrix' if shape else 'a list of coefficients'}")
+            object.__setattr__(self, name, value)
 
     @property
     def is_rectified(self) -> bool:

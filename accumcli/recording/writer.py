@@ -15,7 +15,8 @@ import numpy as np
 from mcap_protobuf.writer import Writer
 
 from ..atomic import opened
-from ..geometry import quat_from_transform
+from ..errors import InputError
+from ..geometry import check_transform, quat_from_transform
 from .calibration import CameraCalibration
 from .messages import calibration_to_msg, image_to_msg, transform_to_msg
 from .ros2 import RosMessage, ros_from_foxglove, typestore
@@ -28,22 +29,40 @@ class _MessageWriter:
         raise NotImplementedError
 
     def calibration(self, topic: str, calibration: CameraCalibration, t_ns: int) -> None:
-        self._put(topic, calibration_to_msg(calibration, t_ns), t_ns)
+        self._put(topic, calibration_to_msg(calibration, _time(t_ns)), _time(t_ns))
 
     def image(self, topic: str, image: np.ndarray, t_ns: int, frame_id: str, encoding: str = "png") -> None:
-        """Write an (H, W) uint8 image as png, jpeg or mono8."""
-        self._put(topic, image_to_msg(image, t_ns, frame_id, encoding), t_ns)
+        """Write an (H, W) uint8 image (or (H, W, 3) BGR: png and jpeg keep the colour) as png, jpeg or
+        mono8; ``InputError`` for anything else (an image that failed to load is None; a float image
+        would be written black)."""
+        if encoding not in ("png", "jpeg", "mono8"):
+            raise InputError(f"{topic}: image encoding {encoding!r}: expected png, jpeg or mono8")
+        if not isinstance(image, np.ndarray) or image.dtype != np.uint8 or not (
+                image.ndim == 2 or (image.ndim == 3 and image.shape[2] == 3 and encoding != "mono8")) or not image.size:
+            what = "None (did the image load?)" if image is None else (
+                f"{image.dtype} {image.shape}" if isinstance(image, np.ndarray) else type(image).__name__)
+            raise InputError(f"{topic}: expected an (H, W) uint8 image (8 bits: convert first), found {what}")
+        self._put(topic, image_to_msg(image, _time(t_ns), frame_id, encoding), _time(t_ns))
 
     def transform(self, parent: str, child: str, T_parent_child: np.ndarray, t_ns: int, topic: str = "/tf",
                   log_time_ns: int | None = None) -> None:
-        translation, quat = quat_from_transform(T_parent_child)
+        """Write ``T_parent_child`` ((4, 4) rigid; ``InputError`` otherwise)."""
+        translation, quat = quat_from_transform(check_transform(T_parent_child, f"T {parent} -> {child}"))
         self.raw_transform(parent, child, translation, quat, t_ns, topic, log_time_ns)
 
     def raw_transform(self, parent: str, child: str, translation, quat_xyzw, t_ns: int, topic: str = "/tf",
                       log_time_ns: int | None = None) -> None:
         """A transform given as translation and quaternion as they are (possibly invalid, for tests)."""
-        self._put(topic, transform_to_msg(parent, child, t_ns, translation, quat_xyzw),
-                  t_ns if log_time_ns is None else log_time_ns)
+        self._put(topic, transform_to_msg(parent, child, _time(t_ns), translation, quat_xyzw),
+                  _time(t_ns if log_time_ns is None else log_time_ns))
+
+
+def _time(t_ns) -> int:
+    """A message time, integer nanoseconds in MCAP's unsigned 64-bit range; ``InputError`` otherwise
+    (a float such as 1.75e18 is not exact in nanoseconds)."""
+    if isinstance(t_ns, (bool, float)) or not isinstance(t_ns, (int, np.integer)) or not 0 <= int(t_ns) < 1 << 64:
+        raise InputError(f"time {t_ns!r}: expected whole nanoseconds (an int, 0 to 2^64 - 1)")
+    return int(t_ns)
 
 
 class RecordingWriter(_MessageWriter):
