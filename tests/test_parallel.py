@@ -81,3 +81,17 @@ def test_workers_option_takes_a_count_or_auto(small_recording, tmp_path):
     assert runner.invoke(main, ["extract", small_recording, "-o", str(auto)]).exit_code == 0
     assert runner.invoke(main, ["extract", small_recording, "-o", str(one), "--workers", "1"]).exit_code == 0
     assert auto.read_bytes() == one.read_bytes()
+
+
+def test_workers_and_frames_given_wrongly_are_input_errors():
+    from accumcli.errors import InputError
+    from accumcli.runs import FrameRange
+    from accumcli.runs.parallel import resolve_workers
+
+    assert resolve_workers("auto", 10) == 1 and resolve_workers(3, 10) == 3
+    for workers in (0, -1, "two", 1.5, True):
+        with pytest.raises(InputError, match="workers: expected a whole number of at least 1"):
+            resolve_workers(workers, 10)
+    for start, stop in ((-3, 2), (5, 2), (1.5, None)):
+        with pytest.raises(InputError, match="expected whole numbers 0 <= START < STOP"):
+            FrameRange(start, stop)

@@ -56,6 +56,11 @@ class FrameRange:
     start: int = 0
     stop: int | None = None
 
+    def __post_init__(self):
+        if not isinstance(self.start, int) or self.start < 0 or (
+                self.stop is not None and (not isinstance(self.stop, int) or self.stop <= self.start)):
+            raise InputError(f"frames {self.start!r}:{self.stop!r}: expected whole numbers 0 <= START < STOP")
+
     @classmethod
     def parse(cls, text: str) -> "FrameRange":
         """``START:STOP`` with either side empty (``10:``, ``:20``, ``:``). A bare number is refused:

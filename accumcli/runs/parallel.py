@@ -24,6 +24,7 @@ import os
 from concurrent.futures import Future, ProcessPoolExecutor
 from typing import Iterable, Iterator
 
+from ..errors import InputError
 from ..extract import ExtractParams, FrameSegments, extract_frame
 from ..lines2d import StageTimes
 from ..recording import StereoFrame
@@ -61,14 +62,18 @@ def _extract(frame: StereoFrame, params: ExtractParams, camera_frame: str) -> tu
 AUTO_MIN_FRAMES = 40
 
 
-def resolve_workers(workers: int | None, frames: int) -> int:
+def resolve_workers(workers: int | str | None, frames: int) -> int:
     """``workers``, or for None (``--workers auto``) what measured fastest on two cores: 2 processes,
     but 1 for fewer than ``AUTO_MIN_FRAMES`` frames or on one CPU. Measured with ``accum accumulate``
     as a whole command (start-up included; farm-bench, 2-core machine, A B A B): 2 workers took
     1.00x the wall time of one on 36 frames (the helper is still starting for most of them), 0.88x on
     60 frames and 0.67x on 120 of 640x480. Under 40 frames a run would wait for a helper that is
     still starting. More than 2 was not measured: give ``--workers N`` on a bigger machine."""
+    if workers == "auto":
+        workers = None
     if workers is not None:
+        if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+            raise InputError(f"workers: expected a whole number of at least 1, or 'auto' / None, found {workers!r}")
         return workers
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     return 1 if frames < AUTO_MIN_FRAMES or cpus < 2 else 2
