@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 from accumcli.runs import FrameRange, accumulate_recording, extract_recording
 
 
