@@ -264,3 +264,14 @@ def test_pinned_blur_and_illumination_act_on_the_images(tmp_path):
     corner = (slice(None), slice(0, 12), slice(0, 12))
     assert np.ptp(sharp[corner], axis=0).max() == 0
     assert np.abs(np.diff(drifting[corner], axis=0)).mean() > 2.0
+
+
+def test_options_that_would_fail_deep_inside_are_refused_up_front():
+    from accumcli.simulation import SimulationOptions
+    from accumcli.simulation.simulate import SimulationOptionError
+
+    for options, message in ((dict(frames=0), "frames 0: expected at least 1"), (dict(width=0), "width 0"),
+                             (dict(supersample=0), "supersample 0"), (dict(baseline=0.0), "baseline 0.0"),
+                             (dict(encoding="bmp"), "encoding 'bmp': expected png, jpeg or mono8")):
+        with pytest.raises(SimulationOptionError, match=message):
+            SimulationOptions(**options)

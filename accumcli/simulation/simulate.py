@@ -107,6 +107,18 @@ class SimulationOptions:
     background: str | None = None
     clutter: bool | None = None
 
+    def __post_init__(self):
+        """The options whose wrong values would fail deep inside, or write a recording accum refuses."""
+        problems = [f"{name} {getattr(self, name)!r}: expected {want}" for name, ok, want in (
+            ("frames", isinstance(self.frames, int) and self.frames >= 1, "at least 1"),
+            ("width", isinstance(self.width, int) and self.width >= 16, "at least 16 px"),
+            ("height", isinstance(self.height, int) and self.height >= 16, "at least 16 px"),
+            ("supersample", isinstance(self.supersample, int) and self.supersample >= 1, "at least 1"),
+            ("baseline", isinstance(self.baseline, (int, float)) and self.baseline > 0, "more than 0 m"),
+            ("encoding", self.encoding in ("png", "jpeg", "mono8"), "png, jpeg or mono8")) if not ok]
+        if problems:
+            raise SimulationOptionError("; ".join(problems))
+
 
 CLASSIC_FIELDS = ("frames", "width", "height", "shape", "seed", "raw", "tf_tree", "pose_noise_deg", "pose_noise_m",
                   "encoding", "baseline", "noise_sigma", "blur_sigma", "supersample", "per_frame_deg")
