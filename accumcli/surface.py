@@ -94,8 +94,7 @@ def support_face_problem(faces: list[Face], support_face: int, poses: np.ndarray
     None if it can."""
     if not len(poses):
         return None
-    facing = np.array([facing_camera(face, poses) for face in faces])        # (F, P)
-    share = float(np.mean(facing[support_face] > 0))
+    share = float(np.mean(facing_camera(faces[support_face], poses) > 0))   # the other faces: ``hidden_face``
     if share <= 0.5:
         return None
     problem = f"support face {support_face} faces the cameras in {share:.0%} of the truth's poses, so the object " \

@@ -56,3 +56,18 @@ def write(path, n=5, *, skip_topics=(), corrupt_left=(), unpaired_right=(), tf_q
                 shift = 20_000_000 if i in unpaired_right else 0
                 w.image("/stereo/right/image", image(i + 100), t + shift, "camera_right", encoding)
     return str(path)
+
+
+def one_pair(path, *, image_topic="/stereo/{side}/image", calibration_topic="/stereo/{side}/calibration",
+             frame_id="camera_{side}", calibrations=None, transforms=(("camera_left", "gripper", (0.0, 0.0, 0.5)),)) -> str:
+    """A recording of one stereo pair at ``T0``: each side's calibration (``calibrations``: (left, right),
+    else ``calibration(side)``) and image on the topics and frame named with ``{side}``, and the
+    ``transforms`` (parent, child, translation; no rotation)."""
+    with RecordingWriter(path) as w:
+        for k, side in enumerate(("left", "right")):
+            cal = calibrations[k] if calibrations is not None else calibration(side)
+            w.calibration(calibration_topic.format(side=side), cal, T0)
+            w.image(image_topic.format(side=side), image(0), T0, frame_id.format(side=side), "png")
+        for parent, child, translation in transforms:
+            w.raw_transform(parent, child, translation, (0.0, 0.0, 0.0, 1.0), T0)
+    return str(path)

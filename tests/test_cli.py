@@ -36,15 +36,10 @@ def test_bad_recordings_end_in_one_line(tmp_path, command, case):
 
 
 def test_renamed_foxglove_topics_are_proposed(tmp_path):
-    from accumcli.recording import RecordingWriter
-
     from . import helpers
 
-    path = tmp_path / "renamed.mcap"
-    with RecordingWriter(path) as w:
-        for side in ("left", "right"):
-            w.calibration(f"/cam/{side}/calibration", helpers.calibration(side), helpers.T0)
-            w.image(f"/cam/{side}/image", helpers.image(0), helpers.T0, f"camera_{side}", "png")
+    path = helpers.one_pair(tmp_path / "renamed.mcap", image_topic="/cam/{side}/image",
+                            calibration_topic="/cam/{side}/calibration", transforms=())
     result = run("info", path)
     assert result.exit_code == 1
     assert ("missing topic /stereo/left/image; the stereo pair looks like: try --left-topic /cam/left/image "
@@ -53,17 +48,11 @@ def test_renamed_foxglove_topics_are_proposed(tmp_path):
 
 
 def test_the_images_frame_is_proposed_and_a_different_camera_frame_warned_of(tmp_path):
-    from accumcli.recording import RecordingWriter
-
     from . import helpers
 
-    path = tmp_path / "optical.mcap"
-    with RecordingWriter(path) as w:
-        for side in ("left", "right"):
-            w.calibration(f"/stereo/{side}/calibration", helpers.calibration(side), helpers.T0)
-            w.image(f"/stereo/{side}/image", helpers.image(0), helpers.T0, f"cam_{side}_optical", "png")
-        w.raw_transform("cam_left_optical", "gripper", (0.0, 0.0, 0.5), (0.0, 0.0, 0.0, 1.0), helpers.T0)
-        w.raw_transform("cam_left_optical", "cam_right_optical", (0.08, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), helpers.T0)
+    path = helpers.one_pair(tmp_path / "optical.mcap", frame_id="cam_{side}_optical",
+                            transforms=(("cam_left_optical", "gripper", (0.0, 0.0, 0.5)),
+                                        ("cam_left_optical", "cam_right_optical", (0.08, 0.0, 0.0))))
     result = run("accumulate", path, "-o", tmp_path / "m.json")
     assert result.exit_code == 1
     assert result.output.strip().splitlines()[-1].endswith(

@@ -124,12 +124,8 @@ def test_image_rect_topics_are_not_rectified_again(tmp_path, caplog):
     assert not np.array_equal(StereoRectifier(*raw).rectify(left, right)[0], left)
     assert _is_rect_topic("/cam/left/image_rect") and _is_rect_topic("/cam/left/image_rect_color/compressed")
     assert not _is_rect_topic("/cam/left/image_raw") and not _is_rect_topic("/stereo/left/image")
-    path = tmp_path / "rect.mcap"
-    with RecordingWriter(path) as w:
-        for side, cal in zip(("left", "right"), raw):
-            w.calibration(f"/cam/{side}/camera_info", cal, helpers.T0)
-            w.image(f"/cam/{side}/image_rect", helpers.image(0), helpers.T0, f"camera_{side}", "png")
-        w.raw_transform("camera_left", "gripper", (0.0, 0.0, 0.5), (0.0, 0.0, 0.0, 1.0), helpers.T0)
+    path = helpers.one_pair(tmp_path / "rect.mcap", image_topic="/cam/{side}/image_rect",
+                            calibration_topic="/cam/{side}/camera_info", calibrations=raw)
     topics = Topics(left_image="/cam/left/image_rect", right_image="/cam/right/image_rect",
                     left_calibration="/cam/left/camera_info", right_calibration="/cam/right/camera_info")
     with caplog.at_level("WARNING", logger="accumcli"), Recording(path, topics) as rec:
@@ -160,12 +156,9 @@ def test_images_without_a_stamp_are_read_at_their_log_time_with_a_warning(tmp_pa
 def test_a_baseline_in_other_units_than_metres_is_warned_of(tmp_path, caplog):
     from . import helpers
 
-    path = tmp_path / "mm.mcap"
-    with RecordingWriter(path) as w:   # the right P[0,3] from a baseline of 80 (mm) instead of 0.08 (m)
-        for side in ("left", "right"):
-            w.calibration(f"/stereo/{side}/calibration", helpers.calibration(side, baseline=80.0), helpers.T0)
-            w.image(f"/stereo/{side}/image", helpers.image(0), helpers.T0, f"camera_{side}", "png")
-        w.raw_transform("camera_left", "gripper", (0.0, 0.0, 0.5), (0.0, 0.0, 0.0, 1.0), helpers.T0)
+    # the right P[0,3] from a baseline of 80 (mm) instead of 0.08 (m)
+    path = helpers.one_pair(tmp_path / "mm.mcap", calibrations=[helpers.calibration(s, baseline=80.0)
+                                                                for s in ("left", "right")])
     with caplog.at_level("WARNING", logger="accumcli"), Recording(path) as rec:
         next(rec.frames())
     assert "the stereo baseline is 80 m: the right P[0,3] must be -fx times the baseline in metres" in caplog.text
