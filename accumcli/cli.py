@@ -198,6 +198,8 @@ def info(recording, options, as_json):
 @click.option("--background", type=click.Choice(["texture", "planes", "lines"]), help="[default: drawn]")
 @click.option("--clutter/--no-clutter", default=None, help="Static solids at the object's depth [drawn: 30 %].")
 @click.option("--raw", is_flag=True, help="Distorted, unrectified images (the calibration rectifies them).")
+@click.option("--distortion", type=click.Choice(["plumb_bob", "equidistant"]), default="plumb_bob", show_default=True,
+              help="With --raw: the lens model (equidistant: fisheye).")
 @click.option("--tf-tree", is_flag=True, help="world -> camera_left static plus world -> gripper at 3x the image "
               "rate, offset in time.")
 @click.option("--pose-noise", default="0,0", metavar="DEG,MM", show_default=True,
@@ -206,7 +208,7 @@ def info(recording, options, as_json):
                    "--tf-tree on its /tf samples, three per frame: at the image times about 0.75 of it).")
 @click.option("--encoding", type=click.Choice(["png", "jpeg", "mono8"]), default="png", show_default=True)
 def simulate(output, count, size, scene, shape, seed, size_mm, distance, contrast, blur, noise, illumination,
-             background, clutter, raw, tf_tree, pose_noise, encoding):
+             background, clutter, raw, distortion, tf_tree, pose_noise, encoding):
     """Render a synthetic stereo recording with ground truth.
 
     \b
@@ -222,8 +224,11 @@ def simulate(output, count, size, scene, shape, seed, size_mm, distance, contras
         raise click.BadParameter(f"expected 64x48 to 8192x8192, found {width}x{height}", param_hint="--size")
     if not output.endswith(".mcap"):
         raise click.BadParameter(f"expected a name ending in .mcap, found {output!r}", param_hint="--output")
+    if distortion != "plumb_bob" and not raw:
+        raise click.BadParameter("applies to raw images only; add --raw", param_hint="--distortion")
     options = SimulationOptions(frames=count, width=width, height=height, shape=shape, seed=seed, raw=raw,
-                                tf_tree=tf_tree, pose_noise_deg=pose_noise[0], pose_noise_m=pose_noise[1] / 1000,
+                                distortion=distortion, tf_tree=tf_tree, pose_noise_deg=pose_noise[0],
+                                pose_noise_m=pose_noise[1] / 1000,
                                 encoding=encoding, scene=scene, size_mm=size_mm, distance_m=distance,
                                 contrast=contrast, blur_sigma=blur, noise_sigma=noise, illumination=illumination,
                                 background=background, clutter=clutter)

@@ -35,6 +35,12 @@ def raw_recording(tmp_path_factory) -> str:
 
 
 @pytest.fixture(scope="session")
+def fisheye_recording(tmp_path_factory) -> str:
+    return _make(tmp_path_factory, "fisheye", frames=4, width=640, height=480, seed=12, raw=True, shape="prism",
+                 distortion="equidistant")
+
+
+@pytest.fixture(scope="session")
 def tf_tree_recording(tmp_path_factory) -> str:
     return _make(tmp_path_factory, "tftree", frames=5, width=320, height=240, seed=13, tf_tree=True,
                  shape="house")

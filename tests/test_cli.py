@@ -125,6 +125,8 @@ def test_simulate_rejects_bad_options(tmp_path):
     assert result.exit_code == 1 and "expected DEG,MM" in result.output
     result = run("simulate", "-o", tmp_path / "missing" / "x.mcap", "--count", "1", "--size", "64x48")
     assert result.exit_code == 1 and "does not exist" in result.output
+    result = run("simulate", "-o", tmp_path / "x.mcap", "--count", "1", "--distortion", "equidistant")
+    assert result.exit_code == 1 and "applies to raw images only; add --raw" in result.output
 
 
 def test_accumulate_without_transforms_is_a_whole_file_error(tmp_path):

@@ -12,6 +12,7 @@ from accumcli.errors import RecordingError
 from accumcli.geometry import make_transform, transform_from_quat, transform_points
 from accumcli.model_io import read_truth
 from accumcli.recording import Recording, RecordingWriter, TransformTree
+from accumcli.recording.calibration import CameraCalibration, check_calibration
 from accumcli.recording.messages import decode_image, image_to_msg
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 
@@ -73,12 +74,31 @@ def mean_truth_edge_offset(path: str) -> float:
     return float(np.mean(np.concatenate(offsets)))
 
 
-def test_raw_images_are_rectified_onto_the_truth(raw_recording, small_recording):
-    raw = mean_truth_edge_offset(raw_recording)
+@pytest.mark.parametrize("raw", ["raw_recording", "fisheye_recording"])
+def test_raw_images_are_rectified_onto_the_truth(raw, small_recording, request):
+    """plumb_bob, and the fisheye model (ROS's equidistant), rectified onto the truth's edges within half
+    a pixel on average (the fisheye images rectified as if they were pinhole ones: 0.75 px)."""
+    offset = mean_truth_edge_offset(request.getfixturevalue(raw))
     rectified = mean_truth_edge_offset(small_recording)
-    print(f"mean truth-edge offset: raw {raw:.3f} px, rectified {rectified:.3f} px")
-    assert raw < 1.0
+    print(f"mean truth-edge offset: {raw} {offset:.3f} px, rectified {rectified:.3f} px")
+    assert offset < 0.5
     assert rectified < 1.0
+
+
+def test_a_fisheye_calibration_is_never_taken_as_rectified():
+    """theta is not tan(theta): with D zero a fisheye image is still distorted; and the model takes 4
+    coefficients under any of its names."""
+    K = np.array([[400.0, 0, 319.5], [0, 400.0, 239.5], [0, 0, 1]])
+    P = np.hstack([K, np.zeros((3, 1))])
+    for name in ("equidistant", "kannala_brandt", "fisheye"):
+        cal = CameraCalibration(640, 480, K, np.zeros(4), np.eye(3), P, name, "camera_left")
+        assert not cal.is_rectified
+        check_calibration(cal, "left")
+    assert CameraCalibration(640, 480, K, np.zeros(5), np.eye(3), P, "plumb_bob", "camera_left").is_rectified
+    with pytest.raises(RecordingError, match="takes 4 coefficients k1..k4, D has 5"):
+        check_calibration(CameraCalibration(640, 480, K, np.zeros(5), np.eye(3), P, "equidistant", "c"), "left")
+    with pytest.raises(RecordingError, match="'fisheye62' is not supported .*rectify the images first"):
+        check_calibration(CameraCalibration(640, 480, K, np.zeros(6), np.eye(3), P, "fisheye62", "c"), "left")
 
 
 def test_rectification_maps_are_computed_once(raw_recording):

@@ -4,7 +4,13 @@ A ``CameraCalibration`` holds K, D, R, P as recorded. ``StereoRectifier`` turns 
 left/right pair of them into the rectified stereo intrinsics that everything
 downstream uses, and (for raw images) the remap tables, computed once per
 calibration. Images are taken as already rectified when D is zero, R is the
-identity and K equals P's left 3x3: then they pass through untouched.
+identity and K equals P's left 3x3 (pinhole models): then they pass through
+untouched. Distortion models: ``plumb_bob`` and ``rational_polynomial`` (OpenCV's
+pinhole model), and the fisheye model under its three names (ROS's
+``equidistant``, Foxglove's ``kannala_brandt``, OpenCV's ``fisheye``: r = f
+theta_d(theta) with D = k1..k4), rectified by ``cv2.fisheye``; a fisheye
+camera's images are never taken as rectified, since theta is not tan(theta)
+even with D zero.
 ``check_calibration`` refuses, before any table is allocated, what OpenCV
 cannot use: a size outside 1..16384 pixels or beyond 16.8 Mpx, a distortion
 vector that is not 0, 4, 5, 8, 12 or 14 long, non-finite K, D, R or P, focal
@@ -20,7 +26,8 @@ import numpy as np
 
 from ..errors import InputError, RecordingError
 
-SUPPORTED_DISTORTION = {"plumb_bob", "rational_polynomial", ""}
+FISHEYE = {"equidistant", "kannala_brandt", "fisheye"}   # one model, ROS's, Foxglove's and OpenCV's name
+SUPPORTED_DISTORTION = {"plumb_bob", "rational_polynomial", ""} | FISHEYE
 DISTORTION_LENGTHS = (0, 4, 5, 8, 12, 14)
 MAX_SIDE = 16384          # pixels, width or height of an image or calibration
 MAX_PIXELS = 3840 * 2160  # width * height (8.3 Mpx, 4K UHD): extraction needs ~120 bytes a pixel of a pair,
@@ -66,8 +73,13 @@ class CameraCalibration:
             object.__setattr__(self, name, value)
 
     @property
+    def fisheye(self) -> bool:
+        return self.distortion_model in FISHEYE
+
+    @property
     def is_rectified(self) -> bool:
-        return (not np.any(self.D)) and np.allclose(self.R, np.eye(3)) and np.allclose(self.K, self.P[:, :3])
+        return (not self.fisheye and not np.any(self.D) and np.allclose(self.R, np.eye(3))
+                and np.allclose(self.K, self.P[:, :3]))
 
     def key(self) -> tuple:
         """Hashable identity, to reuse remap tables while the calibration is unchanged."""
@@ -118,8 +130,11 @@ def check_calibration(cal: CameraCalibration, side: str) -> None:
         raise RecordingError(f"{side} calibration: {problem}")
     if cal.distortion_model not in SUPPORTED_DISTORTION:
         raise RecordingError(f"{side} calibration: distortion model {cal.distortion_model!r} is not supported "
-                             f"(expected plumb_bob or rational_polynomial); rectify the images first (e.g. "
+                             f"(expected plumb_bob, rational_polynomial or equidistant / kannala_brandt); rectify the images first (e.g. "
                              "image_proc) and give their rectified topics with a distortion-free calibration")
+    if cal.fisheye and len(cal.D) != 4:
+        raise RecordingError(f"{side} calibration: the {cal.distortion_model} (fisheye) model takes 4 coefficients "
+                             f"k1..k4, D has {len(cal.D)}")
     if len(cal.D) not in DISTORTION_LENGTHS:
         raise RecordingError(f"{side} calibration: D has {len(cal.D)} coefficients "
                              f"(expected {', '.join(map(str, DISTORTION_LENGTHS))})")
@@ -172,9 +187,7 @@ class StereoRectifier:
             fx=float(P_left[0, 0]), fy=float(P_left[1, 1]), cx=float(P_left[0, 2]), cy=float(P_left[1, 2]),
             baseline=float(baseline), width=int(left.width), height=int(left.height))
         self.rectified_input = images_rectified or (left.is_rectified and right.is_rectified)
-        self._maps = None if self.rectified_input else [
-            cv2.initUndistortRectifyMap(c.K, c.D, c.R, c.P[:, :3], (c.width, c.height), cv2.CV_16SC2)
-            for c in (left, right)]
+        self._maps = None if self.rectified_input else [_rectify_maps(c) for c in (left, right)]
         self.border_distance = self._border_distances()
 
     def _border_distances(self) -> tuple[np.ndarray, np.ndarray] | None:
@@ -200,3 +213,12 @@ class StereoRectifier:
         if self._maps is None:
             return left, right
         return tuple(cv2.remap(img, m1, m2, cv2.INTER_LINEAR) for img, (m1, m2) in zip((left, right), self._maps))
+
+
+def _rectify_maps(cal: CameraCalibration) -> tuple[np.ndarray, np.ndarray]:
+    """OpenCV's remap tables from ``cal``'s raw image to its rectified one (P's 3x3, same size)."""
+    size = (cal.width, cal.height)
+    if cal.fisheye:
+        return cv2.fisheye.initUndistortRectifyMap(cal.K, cal.D.reshape(1, 4), cal.R, cal.P[:, :3], size,
+                                                   cv2.CV_16SC2)
+    return cv2.initUndistortRectifyMap(cal.K, cal.D, cal.R, cal.P[:, :3], size, cv2.CV_16SC2)

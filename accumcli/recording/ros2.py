@@ -10,8 +10,8 @@ Conversions (ROS 2 message -> Foxglove protobuf message):
 - ``sensor_msgs/msg/CompressedImage`` -> ``foxglove.CompressedImage`` (format, data; PNG or JPEG by
   signature, as for protobuf).
 - ``sensor_msgs/msg/CameraInfo`` -> ``foxglove.CameraCalibration``: d, k, r, p to D, K, R, P;
-  distortion_model as written (``calibration`` takes plumb_bob and rational_polynomial and refuses
-  others with a ``RecordingError``).
+  distortion_model as written (``calibration`` takes plumb_bob, rational_polynomial and the fisheye
+  model, equidistant, and refuses others with a ``RecordingError``).
 - ``tf2_msgs/msg/TFMessage`` -> ``foxglove.FrameTransforms``: header.frame_id is the parent.
 - Every timestamp is ``header.stamp``; a zero stamp is left unset, so the reader uses the log time
   (as for an unset protobuf timestamp); a nanosec beyond int32 makes the message undecodable.

@@ -9,7 +9,8 @@ either depth buffer, and on a grey-level step of at least ``MIN_STEP`` in both
 noise-free images).
 
 Options beyond the default: ``raw`` writes distorted images with a small
-rectifying rotation in the calibration; ``tf_tree`` writes a static
+rectifying rotation in the calibration (``distortion``: by the ``plumb_bob``
+model, or the fisheye model ROS calls ``equidistant``); ``tf_tree`` writes a static
 world -> camera_left transform on /tf_static and world -> gripper at three times
 the image rate, offset in time from the images (the truth is the
 interpolation the reader must do, so it stays exact); ``pose_noise`` perturbs
@@ -44,6 +45,7 @@ FRAME_PERIOD_NS = 100_000_000
 MIN_STEP = 10.0 / 255.0
 OCCLUSION_TOLERANCE_M = 0.004
 RAW_MARGIN_PX = 40
+DISTORTIONS = ("plumb_bob", "equidistant")
 
 
 class SimulationOptionError(AccumError, ValueError):
@@ -90,6 +92,7 @@ class SimulationOptions:
     shape: str | None = None
     seed: int = 0
     raw: bool = False
+    distortion: str = "plumb_bob"   # of raw images: plumb_bob or equidistant (fisheye)
     tf_tree: bool = False
     pose_noise_deg: float = 0.0
     pose_noise_m: float = 0.0
@@ -115,13 +118,14 @@ class SimulationOptions:
             ("height", isinstance(self.height, int) and self.height >= 16, "at least 16 px"),
             ("supersample", isinstance(self.supersample, int) and self.supersample >= 1, "at least 1"),
             ("baseline", isinstance(self.baseline, (int, float)) and self.baseline > 0, "more than 0 m"),
-            ("encoding", self.encoding in ("png", "jpeg", "mono8"), "png, jpeg or mono8")) if not ok]
+            ("encoding", self.encoding in ("png", "jpeg", "mono8"), "png, jpeg or mono8"),
+            ("distortion", self.distortion in DISTORTIONS, " or ".join(DISTORTIONS))) if not ok]
         if problems:
             raise SimulationOptionError("; ".join(problems))
 
 
-CLASSIC_FIELDS = ("frames", "width", "height", "shape", "seed", "raw", "tf_tree", "pose_noise_deg", "pose_noise_m",
-                  "encoding", "baseline", "noise_sigma", "blur_sigma", "supersample", "per_frame_deg")
+CLASSIC_FIELDS = ("frames", "width", "height", "shape", "seed", "raw", "distortion", "tf_tree", "pose_noise_deg",
+                  "pose_noise_m", "encoding", "baseline", "noise_sigma", "blur_sigma", "supersample", "per_frame_deg")
 RANDOM_ONLY = ("size_mm", "distance_m", "contrast", "illumination", "background", "clutter")
 SCENES = ("classic", "random")
 
@@ -171,11 +175,16 @@ def _calibrations(o: SimulationOptions, camera: PinholeCamera, rng: np.random.Ge
         D = np.array([rng.uniform(-0.15, -0.08), rng.uniform(0.01, 0.04), rng.uniform(-1e-3, 1e-3),
                       rng.uniform(-1e-3, 1e-3), 0.0])
         R = Rotation.from_rotvec(rng.normal(0.0, np.radians(0.5), 3)).as_matrix()
-        calibrations.append(CameraCalibration(o.width, o.height, K, D, R, P_side, "plumb_bob", frame_id))
         grid = np.stack(np.meshgrid(np.arange(o.width, dtype=np.float64), np.arange(o.height, dtype=np.float64)),
                         axis=-1).reshape(-1, 1, 2)
         criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-9)
-        rect = cv2.undistortPoints(grid, K, D, R=R, P=P[:, :3], criteria=criteria).reshape(o.height, o.width, 2)
+        if o.distortion == "equidistant":   # r = f theta (1 + k1 theta^2 + ...): a mild fisheye's k1..k4
+            D = np.array([D[1], rng.uniform(-0.01, 0.01), 0.0, 0.0])
+            rect = cv2.fisheye.undistortPoints(grid, K, D.reshape(1, 4), R=R, P=P[:, :3], criteria=criteria)
+        else:
+            rect = cv2.undistortPoints(grid, K, D, R=R, P=P[:, :3], criteria=criteria)
+        rect = rect.reshape(o.height, o.width, 2)
+        calibrations.append(CameraCalibration(o.width, o.height, K, D, R, P_side, o.distortion, frame_id))
         raw_maps.append(((rect[..., 0] + RAW_MARGIN_PX).astype(np.float32),
                          (rect[..., 1] + RAW_MARGIN_PX).astype(np.float32)))
     return calibrations, raw_maps
