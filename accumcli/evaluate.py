@@ -160,18 +160,24 @@ def frame_accuracy(segments_camera: Segments, T_camera_object: np.ndarray, edges
 
 
 def pose_errors(times_ns: np.ndarray, poses: np.ndarray, status: list, truth: Truth) -> dict:
-    """Median and max rotation (deg) and translation (mm) errors of tracked poses, and the tracked fraction."""
-    rot, trans, tracked = [], [], 0
+    """Median and max rotation (deg) and translation (mm) errors of tracked poses, and the tracked
+    fraction, over the frames the truth has a pose for (``frames``; the others are counted in
+    ``frames_without_truth`` when there are any: a frame without truth can be judged neither way)."""
+    rot, trans, tracked, judged = [], [], 0, 0
     for t_ns, T, st in zip(times_ns, poses, status):
         T_true = truth.pose_at(int(t_ns))
-        if T_true is None or st != "tracked" or not np.isfinite(T).all():
+        if T_true is None:
+            continue
+        judged += 1
+        if st != "tracked" or not np.isfinite(T).all():
             continue
         tracked += 1
         r, t = pose_error(T, T_true)
         rot.append(r)
         trans.append(t * 1000)
-    n = max(len(times_ns), 1)
-    stats = {"frames": len(times_ns), "tracked_fraction": tracked / n}
+    stats = {"frames": judged, "tracked_fraction": tracked / max(judged, 1)}
+    if judged < len(times_ns):
+        stats["frames_without_truth"] = len(times_ns) - judged
     for name, values in (("rotation_deg", rot), ("translation_mm", trans)):
         stats[f"median_{name}"] = float(np.median(values)) if values else float("nan")
         stats[f"max_{name}"] = float(np.max(values)) if values else float("nan")
@@ -181,13 +187,15 @@ def pose_errors(times_ns: np.ndarray, poses: np.ndarray, status: list, truth: Tr
 def evaluate_frames(frames, truth: Truth, tol: Tolerances = Tolerances(), rows: list | None = None) -> dict:
     """Single-frame figures over ``frames`` (iterable of (timestamp_ns, Segments in the camera frame)),
     placed with the truth's poses: the fraction of segments within the background distance of the
-    object that are correct, the mean single-frame completeness, and the background fraction.
+    object that are correct, the mean single-frame completeness, and the background fraction, over the
+    frames the truth has a pose for (the others are counted in ``frames_without_truth``, if any).
     ``rows``: if a list, each frame's own figures are appended to it (for a plot over frames)."""
     edges = EdgeSamples.of(truth, tol)
-    per_frame, near, correct, background, total = [], 0, 0, 0, 0
+    per_frame, near, correct, background, total, skipped = [], 0, 0, 0, 0, 0
     for t_ns, segments in frames:
         T = truth.pose_at(int(t_ns))
         if T is None:
+            skipped += 1
             continue
         r = frame_accuracy(segments, T, edges, tol)
         per_frame.append(r["completeness"])
@@ -200,7 +208,10 @@ def evaluate_frames(frames, truth: Truth, tol: Tolerances = Tolerances(), rows: 
         correct += r["correct_near"]
         background += r["background"]
         total += r["segments"]
-    return {"frames": len(per_frame), "segments_per_frame": total / max(len(per_frame), 1),
-            "accuracy_near_object": correct / near if near else float("nan"),
-            "single_frame_completeness": float(np.mean(per_frame)) if per_frame else float("nan"),
-            "background": background / total if total else float("nan")}
+    figures = {"frames": len(per_frame), "segments_per_frame": total / max(len(per_frame), 1),
+               "accuracy_near_object": correct / near if near else float("nan"),
+               "single_frame_completeness": float(np.mean(per_frame)) if per_frame else float("nan"),
+               "background": background / total if total else float("nan")}
+    if skipped:
+        figures["frames_without_truth"] = skipped
+    return figures

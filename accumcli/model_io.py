@@ -466,6 +466,15 @@ def read_truth(path) -> Truth:
         b = np.array([e["b"] for e in edges], float).reshape(-1, 3)
     except (KeyError, TypeError, ValueError) as e:
         raise FileFormatError(f"{path}: malformed edge ({type(e).__name__}: {e})") from None
+    if len(a) != len(edges) or len(b) != len(edges):
+        raise FileFormatError(f"{path}: every edge needs 'a' and 'b' of 3 numbers (metres)")
+    if not (np.isfinite(a).all() and np.isfinite(b).all()):
+        raise FileFormatError(f"{path}: edge {int(np.flatnonzero(~np.isfinite(a - b).all(axis=1))[0])} has NaN or "
+                              "infinite coordinates")
+    degenerate = np.flatnonzero(np.linalg.norm(b - a, axis=1) < 1e-6)
+    if len(degenerate):   # no direction: every distance to it is NaN, and it would silently hide background
+        raise FileFormatError(f"{path}: edge {int(degenerate[0])} has no length (a == b); remove it or give its "
+                              "other end")
     seen = [np.asarray(e["seen"], np.int64) if "seen" in e else None for e in edges]
     times, poses, rows = _pose_rows(doc, str(path)) if "poses" in doc else (np.zeros(0, np.int64),
                                                                              np.zeros((0, 4, 4)), [])

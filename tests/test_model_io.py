@@ -282,6 +282,27 @@ def test_bad_model_files(tmp_path, content, message):
         read_model(tmp_path / "bad.json")
 
 
+@pytest.mark.parametrize("edge, message", [
+    ('{"a": [0.05, 0.05, 0.05], "b": [0.05, 0.05, 0.05]}', r"edge 1 has no length \(a == b\)"),
+    ('{"a": [0, 0, NaN], "b": [0, 0, 1]}', "edge 1 has NaN or infinite coordinates"),
+])
+def test_bad_truth_edges(tmp_path, edge, message):
+    """An edge without a direction would make every distance to it NaN, which hid all background."""
+    path = tmp_path / "t.json"
+    path.write_text('{"format": "accum.truth/1", "object_frame": "gripper", "edges": '
+                    '[{"a": [0, 0, 0], "b": [0.1, 0, 0]}, ' + edge + ']}')
+    with pytest.raises(FileFormatError, match=message):
+        read_truth(path)
+
+
+def test_truth_edges_of_two_coordinates(tmp_path):
+    path = tmp_path / "t.json"
+    path.write_text('{"format": "accum.truth/1", "object_frame": "gripper", "edges": ' +
+                    ", ".join(['[{"a": [0, 0], "b": [1, 0]}'] + ['{"a": [0, 0], "b": [1, 0]}'] * 2) + ']}')
+    with pytest.raises(FileFormatError, match="every edge needs 'a' and 'b' of 3 numbers"):
+        read_truth(path)
+
+
 def test_empty_frames_file_has_no_frames(files):
     assert list(read_frames(files["empty"])) == []
 

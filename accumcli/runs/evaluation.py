@@ -71,7 +71,7 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
         times = track.times_ns[keep]
         _check_selected(len(times), len(track.times_ns), frames, path)
         check_truth_times(truth, times, TIME_TOLERANCE_NS, path, truth_path)
-        return pose_errors(times, track.poses[keep], track.status[keep], truth)
+        return _warn_unjudged(pose_errors(times, track.poses[keep], track.status[keep], truth), path, truth_path)
     if kind == "frames":
         rows = [row for i, row in enumerate(read_frames(path))
                 if i >= frames.start and (frames.stop is None or i < frames.stop)]
@@ -82,6 +82,7 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
         per_frame = []
         figures = {**evaluate_frames([(t, s) for t, s, _ in rows], truth, tol, per_frame),
                    **funnel(rows, truth, tol)}
+        _warn_unjudged(figures, path, truth_path)
         if plot:
             from ..plots import plot_frames
 
@@ -89,6 +90,15 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
                 plot_frames(files.open(plot, "wb"), per_frame, f"accum eval {Path(path).name}: single frames")
         return figures
     raise InputError(f"{path}: expected a model, frames or poses file of accum to evaluate, got a {kind} file")
+
+
+def _warn_unjudged(figures: dict, path, truth_path) -> dict:
+    """Say so when some frames of ``path`` have no truth pose: the figures judge only the others."""
+    missing = figures.get("frames_without_truth")
+    if missing:
+        log.warning("%s: %d of %d frames have no pose in %s; the figures judge the %d that do", path, missing,
+                    missing + figures["frames"], truth_path, figures["frames"])
+    return figures
 
 
 def _check_selected(selected: int, lines: int, frames: FrameRange, path) -> None:
