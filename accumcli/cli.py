@@ -77,7 +77,8 @@ def _set_verbosity(ctx: click.Context, param, value):
 
 def verbosity_options(func):
     func = click.option("-q", "--quiet", is_flag=True, expose_value=False, callback=_set_verbosity,
-                        help="No progress bars, only warnings and errors.")(func)
+                        help="No progress bars and no run report (what was done, what was written): only "
+                             "warnings, errors and the figures a command exists to print (info, eval).")(func)
     return click.option("-v", "--verbose", count=True, expose_value=False, callback=_set_verbosity,
                         help="More detail (-vv for debugging output).")(func)
 
@@ -137,13 +138,20 @@ def run_with_progress(label: str, run, *args, **kwargs):
         finish()
 
 
-def _report(lines) -> None:
-    for line in lines:
-        click.echo(line)
+def _quiet() -> bool:
+    return bool(click.get_current_context().find_root().meta.get("quiet"))
+
+
+def _report(lines, product: bool = False) -> None:
+    """Print a run's report on stdout (not with -q), or with ``product`` what the command exists to
+    print (info's summary: printed whatever -q)."""
+    if product or not _quiet():
+        for line in lines:
+            click.echo(line)
 
 
 def _wrote(paths) -> None:
-    click.echo("wrote " + ", ".join(str(p) for p in paths))
+    _report(["wrote " + ", ".join(str(p) for p in paths)])
 
 
 recording_arg = functools.partial(click.argument, "recording", type=click.Path())   # a file or a rosbag2 folder
@@ -169,7 +177,8 @@ def info(recording, options, as_json):
     from .runs import describe_recording
 
     summary, problem = describe_recording(recording, options)
-    _report([info_json(summary)] if as_json else info_lines(summary, options.object_frame, options.camera_frame))
+    _report([info_json(summary)] if as_json else info_lines(summary, options.object_frame, options.camera_frame),
+            product=True)
     if problem:
         raise problem
 
@@ -198,8 +207,8 @@ def info(recording, options, as_json):
 @click.option("--background", type=click.Choice(["texture", "planes", "lines"]), help="[default: drawn]")
 @click.option("--clutter/--no-clutter", default=None, help="Static solids at the object's depth [drawn: 30 %].")
 @click.option("--raw", is_flag=True, help="Distorted, unrectified images (the calibration rectifies them).")
-@click.option("--distortion", type=click.Choice(["plumb_bob", "equidistant"]), default="plumb_bob", show_default=True,
-              help="With --raw: the lens model (equidistant: fisheye).")
+@click.option("--distortion", type=click.Choice(["plumb_bob", "fisheye"]), default="plumb_bob", show_default=True,
+              help="With --raw: the lens model (fisheye: kannala_brandt, ROS's equidistant).")
 @click.option("--tf-tree", is_flag=True, help="world -> camera_left static plus world -> gripper at 3x the image "
               "rate, offset in time.")
 @click.option("--pose-noise", default="0,0", metavar="DEG,MM", show_default=True,
@@ -237,8 +246,8 @@ def simulate(output, count, size, scene, shape, seed, size_mm, distance, contras
         result = run(output, options, progress=lambda done: update(done, count))
     finally:
         finish()
-    click.echo(f"wrote {result.recording} ({result.frames} frames) and {result.truth} "
-               f"({result.edges} edges, {result.seen_fraction:.0%} of edge length seen in >= 3 frames)")
+    _report([f"wrote {result.recording} ({result.frames} frames) and {result.truth} "
+             f"({result.edges} edges, {result.seen_fraction:.0%} of edge length seen in >= 3 frames)"])
 
 
 # -- extract -------------------------------------------------------------------------------------
@@ -446,9 +455,8 @@ def batch(recordings, outdir, track, truth_from_sidecar, workers, ray_address, f
     batch_options = BatchOptions(AccumulateParams(extract=extract_params), options, frames, track, truth_from_sidecar)
     result = run_with_progress("recordings", run_batch, recordings, outdir, batch_options, workers=workers,
                                ray_address=ray_address)
-    _report(table_lines(result.rows))
-    click.echo(f"{len(result.rows)} recordings in {result.seconds:.1f} s, {result.failed} failed; "
-               f"wrote {result.summary}")
+    _report([*table_lines(result.rows), f"{len(result.rows)} recordings in {result.seconds:.1f} s, {result.failed} "
+             f"failed; wrote {result.summary}"])
     if result.failed == len(result.rows):
         raise AccumError("every recording failed (see the status column)")
     if result.failed:

@@ -42,6 +42,7 @@ from .geometry import invert, transform_points
 PIXEL = 0.5  # accum pixel (u, v) + PIXEL = rerun pixel coordinate
 MATCHED, UNMATCHED = (40, 200, 60), (255, 140, 0)  # RGB of 2D segments with / without a 3D partner
 FRAME_SEGMENTS = (230, 90, 30)
+TRUTH = (220, 40, 160)   # a truth's edges: a colour of their own, not the model's blue
 ACCUMULATE_STATS = ("size", "accepted", "confirmed", "new", "pruned", "precision", "completeness", "background")
 KINDS = ("extract", "accumulate", "track", "view")
 JPEG_QUALITY = 85
@@ -70,22 +71,23 @@ def viewer_executable() -> str:
     return found
 
 
-def blueprint(kind: str) -> rrb.Blueprint:
-    """Layout for ``kind``: the 3D world and the left image with its overlays (and the
-    model projected into it); beside them the right image (``extract``, ``view``)
-    or time series of ``stats/*`` (``accumulate``, ``track``)."""
+def blueprint(kind: str, images: bool = True) -> rrb.Blueprint:
+    """Layout for ``kind``: the 3D world and, beside it, the left image with its overlays (and the
+    model and truth projected into it) and the right image, and under them time series of
+    ``stats/*`` (``accumulate``, ``track``); ``images`` False (a view without a recording): the
+    world alone, no empty image panels."""
     if kind not in KINDS:
         raise ValueError(f"unknown kind {kind!r}, expected one of {KINDS}")
     world = rrb.Spatial3DView(origin="world", name="world")
-    left = rrb.Spatial2DView(origin="world/camera", contents=["$origin/**", "/world/model/**"], name="left image")
+    if not images:
+        return rrb.Blueprint(world, collapse_panels=True)
+    left = rrb.Spatial2DView(origin="world/camera", contents=["$origin/**", "/world/model/**", "/world/truth/**"],
+                             name="left image")
     right = rrb.Spatial2DView(origin="images/right", name="right image")
-    images = rrb.Vertical(left, right)
+    panels = [left, right]
     if kind in ("accumulate", "track"):
-        layout = rrb.Horizontal(world, rrb.Vertical(left, rrb.TimeSeriesView(origin="stats", name="counts")),
-                                column_shares=[3, 2])
-    else:
-        layout = rrb.Horizontal(world, images, column_shares=[3, 2])
-    return rrb.Blueprint(layout, collapse_panels=True)
+        panels.append(rrb.TimeSeriesView(origin="stats", name="counts"))
+    return rrb.Blueprint(rrb.Horizontal(world, rrb.Vertical(*panels), column_shares=[3, 2]), collapse_panels=True)
 
 
 def _strips(endpoints: np.ndarray) -> np.ndarray:
@@ -111,14 +113,15 @@ class RerunLog:
     """Logs accum's frames, segments and models to one Rerun recording."""
 
     def __init__(self, app: str, rrd: str | None = None, kind: str = "view", spawn: bool = False,
-                 connect: str | None = None):
+                 connect: str | None = None, images: bool = True):
         """``app``: application id; exactly one of ``rrd`` (file path, works headless; give
         ``OutputSet.path(...)`` to make the .rrd part of a run's atomic set), ``spawn``
         (start a viewer; AccumError from ``viewer_executable`` where none can run) or
-        ``connect`` (gRPC URL, e.g. ``rerun+http://127.0.0.1:9876/proxy``)."""
+        ``connect`` (gRPC URL, e.g. ``rerun+http://127.0.0.1:9876/proxy``); ``images``: whether
+        the layout has image panels (``blueprint``)."""
         if (rrd is not None) + bool(spawn) + (connect is not None) != 1:
             raise ValueError("RerunLog needs exactly one sink: rrd, spawn or connect")
-        layout = blueprint(kind)
+        layout = blueprint(kind, images)
         executable = viewer_executable() if spawn else None
         self.rec = rr.RecordingStream(app, recording_id=uuid.uuid4())
         if rrd is not None:
@@ -185,6 +188,11 @@ class RerunLog:
             self.rec.log(f"{path}/{name}", rr.LineStrips3D(_strips(ends[keep]), colors=colors[keep],
                                                                 radii=rr.Radius.ui_points(width)))
 
+    def truth(self, truth, T_world_object: np.ndarray = np.eye(4), path: str = "world/truth") -> None:
+        """A truth's edges (``Segments``, object frame) in world, in ``TRUTH`` colour on ``path``."""
+        ends = transform_points(T_world_object, truth.endpoints().reshape(-1, 3)).reshape(-1, 2, 3)
+        self.rec.log(path, rr.LineStrips3D(_strips(ends), colors=TRUTH, radii=rr.Radius.ui_points(1.0)))
+
     def scalars(self, values: dict) -> None:
         """One ``stats/<name>`` time series per finite numeric value."""
         for name, value in values.items():
@@ -216,29 +224,39 @@ class RerunLog:
         self.model(model)
         self.scalars({k: row[k] for k in ACCUMULATE_STATS if k in row})
 
-    def recording_frame(self, frame, models: dict, T_camera_object: np.ndarray | None, source: str = "recorded") -> None:
-        """One frame of ``accum view`` on a recording: world = left camera frame; each model
-        (name -> Segments) placed at the frame's object pose on ``world/model/<name>`` (so the left
-        image shows it too), or cleared where the frame has none; ``source``, where the pose comes
-        from (a poses file's status and reason), on ``pose_source``."""
+    def recording_frame(self, frame, models: dict, T_camera_object: np.ndarray | None, source: str = "recorded",
+                        truth=None) -> None:
+        """One frame of ``accum view`` on a recording: world = left camera frame (``posed_frame``),
+        and the frame's camera and images."""
         self.set_frame(frame.index, frame.timestamp_ns)
         self.camera(frame.intrinsics, np.eye(4))
         self.images(frame)
+        self.posed(models, T_camera_object, source, truth)
+
+    def posed(self, models: dict, T_camera_object: np.ndarray | None, source: str, truth=None) -> None:
+        """At the current time, in world = the left camera frame: each model (name -> Segments) placed
+        at the object pose ``T_camera_object`` on ``world/model/<name>`` (so the left image shows it
+        too), and ``truth`` (Segments or None) on ``world/truth``, or both cleared where there is no
+        pose; ``source``, where the pose comes from (a poses file's status and reason), on
+        ``pose_source``."""
         self.rec.log("pose_source", rr.TextLog(source, level="INFO" if T_camera_object is not None else "WARN"))
         if T_camera_object is None:
             self.rec.log("world/model", rr.Clear(recursive=True))
+            self.rec.log("world/truth", rr.Clear(recursive=True))
             self.rec.log("world/object", rr.Clear(recursive=False))
             return
         for name, model in models.items():
             self.model(model, T_camera_object, f"world/model/{name}")
+        if truth is not None:
+            self.truth(truth, T_camera_object)
         self.rec.log("world/object", rr.Transform3D(translation=T_camera_object[:3, 3],
                                                     mat3x3=T_camera_object[:3, :3]),
                      rr.TransformAxes3D(0.05))
 
-    def frame_segments(self, index: int, timestamp_ns: int, segments) -> None:
-        """One line of a frames file: its 3D segments in world = the left camera frame."""
+    def frame_segments(self, index: int, timestamp_ns: int, segments, T_world_camera: np.ndarray = np.eye(4)) -> None:
+        """One line of a frames file: its 3D segments (left camera frame) in world."""
         self.set_frame(index, timestamp_ns)
-        self.segments_3d("world/frame_segments", segments, np.eye(4))
+        self.segments_3d("world/frame_segments", segments, T_world_camera)
 
     def tracking(self, frame, model, estimate, trajectory: list) -> None:
         """One frame of ``accum track``: world = left camera frame; the model placed at the

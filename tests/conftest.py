@@ -37,7 +37,7 @@ def raw_recording(tmp_path_factory) -> str:
 @pytest.fixture(scope="session")
 def fisheye_recording(tmp_path_factory) -> str:
     return _make(tmp_path_factory, "fisheye", frames=4, width=640, height=480, seed=12, raw=True, shape="prism",
-                 distortion="equidistant")
+                 distortion="fisheye")
 
 
 @pytest.fixture(scope="session")

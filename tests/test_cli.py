@@ -120,12 +120,22 @@ def test_info_summary(small_recording):
     assert "baseline 80.00 mm" in result.output and "gripper in camera_left: 6/6 frames" in result.output
 
 
+def test_quiet_drops_the_run_report_but_not_the_figures(small_recording, tmp_path):
+    """-q: no report of what was done and written on stdout; info's and eval's figures stay."""
+    model = tmp_path / "m.json"
+    result = run("-q", "accumulate", small_recording, "-o", model, "--frames", "0:3")
+    assert result.exit_code == 0 and result.output == "" and model.exists()
+    assert "3 frames accumulated" in run("accumulate", small_recording, "-o", model, "--frames", "0:3").output
+    assert "6 stereo frames" in run("info", small_recording, "-q").output
+    assert "precision" in run("eval", model, small_recording.replace(".mcap", ".truth.json"), "-q").output
+
+
 def test_simulate_rejects_bad_options(tmp_path):
     result = run("simulate", "-o", tmp_path / "x.mcap", "--pose-noise", "abc")
     assert result.exit_code == 1 and "expected DEG,MM" in result.output
     result = run("simulate", "-o", tmp_path / "missing" / "x.mcap", "--count", "1", "--size", "64x48")
     assert result.exit_code == 1 and "does not exist" in result.output
-    result = run("simulate", "-o", tmp_path / "x.mcap", "--count", "1", "--distortion", "equidistant")
+    result = run("simulate", "-o", tmp_path / "x.mcap", "--count", "1", "--distortion", "fisheye")
     assert result.exit_code == 1 and "applies to raw images only; add --raw" in result.output
 
 

@@ -205,6 +205,19 @@ def test_track_command_writes_poses_json_and_mcap(noisy_pair, tmp_path):
     assert figures["median_translation_mm"] < 2.0
     bad = runner.invoke(main, ["track", str(model), exact, "-o", str(tmp_path / "p.json"), "--init", "1,2,3"])
     assert bad.exit_code == 1 and "x,y,z,qx,qy,qz,qw" in bad.output
+    for option in ("--poses-topic", "--poses-child-frame"):   # an empty name was written, or became the default
+        bad = runner.invoke(main, ["track", str(model), exact, "-o", str(poses_mcap), option, " "])
+        assert bad.exit_code == 1 and f"({option}): expected a name" in bad.output
+    # a model of another object (scaled by 1.5) tracks nothing: the TUM and MCAP outputs are empty, and said so
+    doc = json.loads(model.read_text())
+    for s in doc["segments"]:
+        s["center"], s["length"] = [1.5 * c for c in s["center"]], 1.5 * s["length"]
+    wrong = tmp_path / "wrong.json"
+    wrong.write_text(json.dumps(doc))
+    result = runner.invoke(main, ["track", str(wrong), exact, "--frames", "0:2", "-o", str(tmp_path / "w.tum"),
+                                  "-o", str(tmp_path / "w.json")])
+    assert result.exit_code == 0 and "2 frames: 0 tracked" in result.output
+    assert f"no frame tracked: {tmp_path / 'w.tum'} holds no pose" in result.output
 
 
 def test_tracked_motion_repairs_noisy_gripper_poses(noisy_pair):

@@ -130,12 +130,14 @@ def blueprint_views(path) -> list[str]:
     return sorted(views)
 
 
-@pytest.mark.parametrize("kind, views", [("accumulate", ["2D", "3D", "TimeSeries"]),
-                                         ("track", ["2D", "3D", "TimeSeries"]),
-                                         ("extract", ["2D", "2D", "3D"]), ("view", ["2D", "2D", "3D"])])
-def test_blueprint_is_saved(tmp_path, kind, views):
+@pytest.mark.parametrize("kind, images, views", [("accumulate", True, ["2D", "2D", "3D", "TimeSeries"]),
+                                                 ("track", True, ["2D", "2D", "3D", "TimeSeries"]),
+                                                 ("extract", True, ["2D", "2D", "3D"]),
+                                                 ("view", True, ["2D", "2D", "3D"]), ("view", False, ["3D"])])
+def test_blueprint_is_saved(tmp_path, kind, images, views):
+    """Both images wherever they are logged; no empty image panel where none is (a view without a recording)."""
     path = tmp_path / "bp.rrd"
-    RerunLog("accum test", rrd=str(path), kind=kind).close()
+    RerunLog("accum test", rrd=str(path), kind=kind, images=images).close()
     assert len(RrdReader(path).recordings()) == 1
     assert blueprint_views(path) == views
 
@@ -257,13 +259,51 @@ def test_view_shows_a_trackers_failure_and_every_model(small_recording, tmp_path
     track.write_text(json.dumps({"format": "accum.poses/1", "parent_frame_id": "camera_left",
                                  "child_frame_id": "gripper", "poses": poses}))
     rrd = tmp_path / "v.rrd"
-    view([small_recording, str(tmp_path / "a" / "model.json"), str(tmp_path / "b" / "model.json"), str(track)],
-         rrd=str(rrd))
+    truth_path = small_recording.replace(".mcap", ".truth.json")
+    view([small_recording, str(tmp_path / "a" / "model.json"), str(tmp_path / "b" / "model.json"), str(track),
+          truth_path], rrd=str(rrd))
     paths, frames = read_rrd(str(rrd))
-    assert {"world/model/model/accepted", "world/model/model_2/accepted"} <= paths
+    assert {"world/model/model/accepted", "world/model/model_2/accepted", "world/truth"} <= paths
+    assert not any(p.startswith("world/model/truth") for p in paths)   # the truth is not drawn as a model
+    assert rrd_column(str(rrd), "world/truth", "LineStrips3D:colors")[0][0] == \
+        int.from_bytes(bytes([*visualize.TRUTH, 255]), "big")
     sources = [row[0] for row in rrd_column(str(rrd), "pose_source", "TextLog:text")]
     assert sources[:3] == ["poses.json: tracked", "poses.json: tracked",
                            "poses.json: lost (coverage 0.10 in both images (needs 0.45))"]
     assert sources[6:] == ["recorded"] * (frames - 6)   # beyond the poses file: the recording's poses
     strip = rrd_column(str(rrd), "world/trajectory", "LineStrips3D:strips")[-1][0]
     assert len(strip) == frames - 1   # every frame but the lost one, once
+
+
+def test_view_without_a_recording_places_the_models_at_the_poses(small_recording, tmp_path):
+    """A model with a poses file: world is the camera frame, the model drawn at each tracked pose (it
+    stood at the origin while the trajectory was in the camera frame); a model alone: the object frame."""
+    import json
+
+    from accumcli.geometry import transform_from_quat
+    from accumcli.model_io import read_model
+    from accumcli.runs import accumulate_recording, view
+
+    model_path = tmp_path / "model.json"
+    accumulate_recording(small_recording, [str(model_path)])
+    model = read_model(model_path)
+    truth = json.loads(open(small_recording.replace(".mcap", ".truth.json")).read())
+    track = tmp_path / "poses.json"
+    track.write_text(json.dumps({"format": "accum.poses/1", "parent_frame_id": "camera_left",
+                                 "child_frame_id": "gripper", "poses": truth["poses"]}))
+    rrd = tmp_path / "v.rrd"
+    view([str(model_path), str(track)], rrd=str(rrd))
+    paths, frames = read_rrd(str(rrd))
+    assert frames == len(truth["poses"]) and "world/camera/image" not in paths
+    strips = rrd_column(str(rrd), "world/model/model/accepted", "LineStrips3D:strips")
+    drawn = np.array(strips[0], float).reshape(-1, 3).mean(axis=0)
+    T = transform_from_quat(truth["poses"][0]["translation"], truth["poses"][0]["rotation_xyzw"])
+    expected = transform_points(T, model.select(model.accepted).endpoints().reshape(-1, 3)).mean(axis=0)
+    assert np.allclose(drawn, expected, atol=1e-5)
+    trajectory = np.array(rrd_column(str(rrd), "world/trajectory", "LineStrips3D:strips")[-1][0])
+    assert np.allclose(trajectory[0], T[:3, 3], atol=1e-6)   # in the same frame as the model
+    alone = tmp_path / "m.rrd"
+    view([str(model_path)], rrd=str(alone))
+    first = np.array(rrd_column(str(alone), "world/model/model/accepted", "LineStrips3D:strips")[0], float)
+    at_origin = model.select(model.accepted).endpoints().reshape(-1, 3).mean(axis=0)
+    assert np.allclose(first.reshape(-1, 3).mean(axis=0), at_origin, atol=1e-5)

@@ -130,8 +130,9 @@ def check_calibration(cal: CameraCalibration, side: str) -> None:
         raise RecordingError(f"{side} calibration: {problem}")
     if cal.distortion_model not in SUPPORTED_DISTORTION:
         raise RecordingError(f"{side} calibration: distortion model {cal.distortion_model!r} is not supported "
-                             f"(expected plumb_bob, rational_polynomial or equidistant / kannala_brandt); rectify the images first (e.g. "
-                             "image_proc) and give their rectified topics with a distortion-free calibration")
+                             "(expected plumb_bob, rational_polynomial or equidistant / kannala_brandt); rectify the "
+                             "images first (e.g. image_proc) and give their rectified topics with a distortion-free "
+                             "calibration")
     if cal.fisheye and len(cal.D) != 4:
         raise RecordingError(f"{side} calibration: the {cal.distortion_model} (fisheye) model takes 4 coefficients "
                              f"k1..k4, D has {len(cal.D)}")

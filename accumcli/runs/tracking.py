@@ -68,6 +68,9 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
     beside the recording's own /tf in Foxglove).
     """
     outputs, frames = path_list(outputs, "outputs"), frame_range(frames)
+    for name, value in (("poses_topic", poses_topic), ("poses_child_frame", poses_child_frame)):
+        if value is not None and not (isinstance(value, str) and value.strip()):
+            raise InputError(f"{name} (--{name.replace('_', '-')}): expected a name, found {value!r}")
     if not isinstance(model, (Segments, str, os.PathLike)):
         raise InputError(f"model: expected a model file's path or Segments, found {type(model).__name__}")
     model_file = None if isinstance(model, Segments) else model
@@ -125,5 +128,9 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
                                  child_frame_id=poses_child_frame or f"{rec.object_frame}_tracked")
             else:
                 write_poses(files.open(path), track)
+        empty = [str(p) for p in outputs if str(p).lower().endswith((".tum", ".mcap"))]
+        if empty and not track.tracked().any():
+            log.warning("no frame tracked: %s hold%s no pose (poses.json says why each frame is lost)",
+                        ", ".join(empty), "s" if len(empty) == 1 else "")
     return TrackingResult(track, time.perf_counter() - t0, [str(p) for p in (*outputs, rrd) if p], tracker.params,
                           tracker.limits_source)

@@ -3,26 +3,31 @@ as a picture."""
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import AccumError, InputError
+from ..geometry import invert, transform_from_quat
 from ..model_io import check_kind, read_frames, read_model, read_poses, read_truth
 from ..outputs import OutputSet
 from ..segments import Segments
 from .base import FrameRange, Progress, RecordingOptions, frame_range, no_progress, path_list
 from .checks import check_same_time
 
+log = logging.getLogger("accumcli")
+
 
 @dataclass
 class ViewInputs:
-    """The inputs sorted by kind (recognised by content): at most one recording, models by name
-    (a truth's edges appear as the model ``truth``), pose tracks and frames files."""
+    """The inputs sorted by kind (recognised by content): at most one recording, models by name, a
+    truth's edges (``Segments``, drawn apart from the models), pose tracks and frames files."""
 
     recording: str | None = None
     models: dict = field(default_factory=dict)
+    truth: Segments | None = None
     tracks: list = field(default_factory=list)
     track_paths: list = field(default_factory=list)
     frames_files: list = field(default_factory=list)
@@ -42,9 +47,10 @@ class ViewInputs:
                 truth = read_truth(path)
                 direction = truth.b - truth.a
                 length = np.linalg.norm(direction, axis=1)
-                inputs.models["truth"] = Segments(truth.object_frame, (truth.a + truth.b) / 2,
-                                                  direction / np.maximum(length, 1e-12)[:, None], length,
-                                                  np.ones(len(length)), np.ones(len(length), np.int64))
+                if inputs.truth is not None:
+                    raise InputError(f"{path}: give at most one truth")
+                inputs.truth = Segments(truth.object_frame, (truth.a + truth.b) / 2, direction / length[:, None],
+                                        length, np.ones(len(length)), np.ones(len(length), np.int64))
             elif kind == "poses":
                 inputs.tracks.append(read_poses(path))
                 inputs.track_paths.append(str(path))
@@ -92,10 +98,12 @@ def view(paths, *, rrd=None, spawn: bool = False, connect: str | None = None, pn
          png_frame: int | None = None, options: RecordingOptions = RecordingOptions(),
          frames: FrameRange = FrameRange(), progress: Progress = no_progress) -> list[str]:
     """Show ``paths`` in Rerun (exactly one of ``rrd``, ``spawn``, ``connect``) and/or draw ``png``.
-    With a recording, world is the left camera frame and each model is placed at the object's pose
-    in every frame: a poses file's where it has that frame (none where that frame is not 'tracked':
-    the tracker's status and reason are logged on ``pose_source``), else the recording's. Returns the
-    files written."""
+    With a recording, world is the left camera frame and each model (and the truth) is placed at the
+    object's pose in every frame: a poses file's where it has that frame (none where that frame is
+    not 'tracked': the tracker's status and reason are logged on ``pose_source``), else the
+    recording's. Without a recording but with poses files, the same at each of their times (no
+    images). With neither, world is the object frame: the models and truth as they are, a frames
+    file's segments placed by its lines' ``T_camera_object``. Returns the files written."""
     paths, frames = path_list(paths, "paths"), frame_range(frames)
     if sum(map(bool, (rrd, spawn, connect))) > 1:
         raise InputError("choose one of --rrd, --spawn and --connect")
@@ -116,7 +124,8 @@ def view(paths, *, rrd=None, spawn: bool = False, connect: str | None = None, pn
 def _log_to_rerun(inputs: ViewInputs, rrd, spawn, connect, options, frames, progress) -> None:
     from ..visualize import RerunLog
 
-    viz = RerunLog("accum view", rrd=rrd, kind="view", spawn=spawn, connect=connect)
+    viz = RerunLog("accum view", rrd=rrd, kind="view", spawn=spawn, connect=connect,
+                   images=inputs.recording is not None)
     positions = []
     if inputs.recording:
         with options.open(inputs.recording, require_pose=False) as rec:
@@ -124,21 +133,41 @@ def _log_to_rerun(inputs: ViewInputs, rrd, spawn, connect, options, frames, prog
             inputs.check_tracks(rec.time_span_ns, options.tolerance_ns, inputs.recording)
             for done, frame in enumerate(rec.frames(frames.start, frames.stop), 1):
                 T, source = inputs.pose_at(frame.timestamp_ns, frame.T_camera_object, options.tolerance_ns)
-                viz.recording_frame(frame, inputs.models, T, source)
+                viz.recording_frame(frame, inputs.models, T, source, inputs.truth)
                 if T is not None:
                     positions.append(T[:3, 3])
                 progress(done, total)
-    else:
+    elif inputs.tracks:   # world = the camera frame: the models at the poses files' times and poses
+        times = np.unique(np.concatenate([track.times_ns for track in inputs.tracks]))
+        for index, t_ns in enumerate(times):
+            T, source = inputs.pose_at(int(t_ns), None, options.tolerance_ns)
+            viz.set_frame(index, int(t_ns))
+            viz.posed(inputs.models, T, source, inputs.truth)
+            if T is not None:
+                positions.append(T[:3, 3])
+    else:   # world = the object frame
         for name, model in inputs.models.items():
             viz.model(model, np.eye(4), f"world/model/{name}")
-        for track in inputs.tracks:   # without a recording, the poses files' own positions
-            ok = np.isfinite(track.poses).all(axis=(1, 2))
-            positions.extend(track.poses[ok, :3, 3])
+        if inputs.truth is not None:
+            viz.truth(inputs.truth)
     if positions:
         viz.trajectory(np.array(positions))
+    object_world = not (inputs.recording or inputs.tracks) and (inputs.models or inputs.truth is not None)
     for path in inputs.frames_files:
+        unplaced = 0
         for index, (t_ns, segments, doc) in enumerate(read_frames(path)):
-            viz.frame_segments(doc.get("frame_index", index), t_ns, segments)
+            T_world_camera = np.eye(4)
+            if object_world:   # the line's pose places its segments beside the model
+                pose = doc.get("T_camera_object")
+                try:
+                    T_world_camera = invert(transform_from_quat(pose["translation"], pose["rotation_xyzw"]))
+                except (KeyError, TypeError, ValueError):
+                    unplaced += 1
+                    continue
+            viz.frame_segments(doc.get("frame_index", index), t_ns, segments, T_world_camera)
+        if unplaced:
+            log.warning("%s: %d frames have no T_camera_object and are not shown (the model is drawn in the "
+                        "object frame); add the recording to show them in the camera's", path, unplaced)
     viz.close()
 
 
@@ -147,7 +176,7 @@ def _draw_picture(inputs: ViewInputs, png, png_frame, options) -> None:
     from ..extract import extract_frame
     from ..render import render_frame_panel, render_model, write_png
 
-    named = [m for name, m in inputs.models.items() if name != "truth"] or list(inputs.models.values())
+    named = list(inputs.models.values()) or ([inputs.truth] if inputs.truth is not None else [])
     if not named:
         raise InputError("a picture (--png) needs a model among the inputs")
     if not inputs.recording:

@@ -10,7 +10,8 @@ noise-free images).
 
 Options beyond the default: ``raw`` writes distorted images with a small
 rectifying rotation in the calibration (``distortion``: by the ``plumb_bob``
-model, or the fisheye model ROS calls ``equidistant``); ``tf_tree`` writes a static
+model, or ``fisheye``, written under Foxglove's name ``kannala_brandt``, ROS's
+``equidistant``); ``tf_tree`` writes a static
 world -> camera_left transform on /tf_static and world -> gripper at three times
 the image rate, offset in time from the images (the truth is the
 interpolation the reader must do, so it stays exact); ``pose_noise`` perturbs
@@ -45,7 +46,7 @@ FRAME_PERIOD_NS = 100_000_000
 MIN_STEP = 10.0 / 255.0
 OCCLUSION_TOLERANCE_M = 0.004
 RAW_MARGIN_PX = 40
-DISTORTIONS = ("plumb_bob", "equidistant")
+DISTORTIONS = ("plumb_bob", "fisheye")
 
 
 class SimulationOptionError(AccumError, ValueError):
@@ -92,7 +93,7 @@ class SimulationOptions:
     shape: str | None = None
     seed: int = 0
     raw: bool = False
-    distortion: str = "plumb_bob"   # of raw images: plumb_bob or equidistant (fisheye)
+    distortion: str = "plumb_bob"   # of raw images: plumb_bob or fisheye
     tf_tree: bool = False
     pose_noise_deg: float = 0.0
     pose_noise_m: float = 0.0
@@ -178,13 +179,15 @@ def _calibrations(o: SimulationOptions, camera: PinholeCamera, rng: np.random.Ge
         grid = np.stack(np.meshgrid(np.arange(o.width, dtype=np.float64), np.arange(o.height, dtype=np.float64)),
                         axis=-1).reshape(-1, 1, 2)
         criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-9)
-        if o.distortion == "equidistant":   # r = f theta (1 + k1 theta^2 + ...): a mild fisheye's k1..k4
+        fisheye = o.distortion == "fisheye"
+        if fisheye:   # r = f theta (1 + k1 theta^2 + ...): a mild fisheye's k1..k4
             D = np.array([D[1], rng.uniform(-0.01, 0.01), 0.0, 0.0])
             rect = cv2.fisheye.undistortPoints(grid, K, D.reshape(1, 4), R=R, P=P[:, :3], criteria=criteria)
         else:
             rect = cv2.undistortPoints(grid, K, D, R=R, P=P[:, :3], criteria=criteria)
         rect = rect.reshape(o.height, o.width, 2)
-        calibrations.append(CameraCalibration(o.width, o.height, K, D, R, P_side, o.distortion, frame_id))
+        model = "kannala_brandt" if fisheye else "plumb_bob"   # Foxglove's names
+        calibrations.append(CameraCalibration(o.width, o.height, K, D, R, P_side, model, frame_id))
         raw_maps.append(((rect[..., 0] + RAW_MARGIN_PX).astype(np.float32),
                          (rect[..., 1] + RAW_MARGIN_PX).astype(np.float32)))
     return calibrations, raw_maps
