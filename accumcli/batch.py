@@ -28,6 +28,7 @@ from .errors import AccumError, InputError
 from .model_io import dumps
 from .pipeline import AccumulateParams
 from .runs import FrameRange, RecordingOptions, accumulate_recording, evaluate_file, track_recording
+from .runs.parallel import resolve_workers
 
 COLUMNS = ("recording", "frames", "segments", "accepted", "precision", "completeness", "background", "status")
 TABLE_COLUMNS = COLUMNS[:-1] + ("pairs_per_s", "status")
@@ -126,8 +127,9 @@ def run_batch(recordings, outdir, options: BatchOptions = BatchOptions(), *, wor
     if len(set(names)) != len(names):
         twice = sorted({n for n in names if names.count(n) > 1})
         raise InputError(f"two recordings have the same name ({', '.join(twice)}): their outputs would collide")
-    if workers < 1:
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise InputError(f"expected at least 1 worker, found {workers}")
+    workers = resolve_workers(workers, len(recordings))   # capped at the recordings and the CPUs
     try:
         Path(outdir).mkdir(parents=True, exist_ok=True)
     except OSError as e:

@@ -59,14 +59,17 @@ def test_this_process_and_a_ready_helper_share_the_frames_and_hand_them_back_in_
     assert times.seconds["lines"] > 0
 
 
-def test_auto_workers_use_both_cores_only_for_recordings_long_enough(monkeypatch):
+def test_auto_workers_use_both_cores_only_for_recordings_long_enough(monkeypatch, caplog):
     import os
 
     from accumcli.runs.parallel import AUTO_MIN_FRAMES, resolve_workers
 
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1, 2, 3}, raising=False)
     assert resolve_workers(None, AUTO_MIN_FRAMES) == 2 and resolve_workers(None, AUTO_MIN_FRAMES - 1) == 1
-    assert resolve_workers(3, 2) == 3
+    assert resolve_workers(3, 10) == 3 and not caplog.text
+    # a number given is capped at the frames, and at the CPUs with a warning (99999 ran for minutes)
+    assert resolve_workers(3, 2) == 2 and not caplog.text
+    assert resolve_workers(99999, 100) == 4 and "--workers 99999: this machine gives the run 4 CPUs" in caplog.text
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0}, raising=False)
     assert resolve_workers(None, 1000) == 1
 
@@ -90,7 +93,7 @@ def test_workers_and_frames_given_wrongly_are_input_errors():
     from accumcli.runs import FrameRange
     from accumcli.runs.parallel import resolve_workers
 
-    assert resolve_workers("auto", 10) == 1 and resolve_workers(3, 10) == 3
+    assert resolve_workers("auto", 10) == 1 and resolve_workers(1, 10) == 1
     for workers in (0, -1, "two", 1.5, True):
         with pytest.raises(InputError, match="workers: expected a whole number of at least 1"):
             resolve_workers(workers, 10)

@@ -14,26 +14,68 @@ The pool starts its processes from a fork server (``forkserver``), not by forkin
 a fork of a process whose OpenCV and BLAS thread pools are running can deadlock in the child. As
 with any multiprocessing, a script that calls a run with ``workers`` > 1 must guard its entry
 point (``if __name__ == "__main__":``), since the workers import the main module.
+
+Interrupts are this process's alone: a SIGINT or SIGTERM sent to the whole process group
+(``timeout``, Ctrl-C in a terminal, a service manager stopping the job) must not kill a helper
+(the run then ended in a BrokenProcessPool traceback, or a helper printed its KeyboardInterrupt),
+nor a helper die with a frame half sent to it (CPython 3.11 then waits for good). So the fork
+server starts with both ignored, which its processes inherit (``_start_pool``), every helper
+ignores them too (``_helper_start``), and frames go to the helpers only once all of them have
+warmed up (a helper that died starting is seen there, and this process extracts every frame).
+This process stops handing out frames, waits for the few queued, and cleans its outputs up.
 """
 
 from __future__ import annotations
 
 import collections
+import logging
 import multiprocessing
 import os
+import signal
 from concurrent.futures import Future, ProcessPoolExecutor
 from typing import Iterable, Iterator
 
 from ..errors import InputError
 from ..extract import ExtractParams, FrameSegments, extract_frame
 from ..lines2d import StageTimes
+from ..outputs import signals_blocked
 from ..recording import StereoFrame
 
+log = logging.getLogger("accumcli")
 
-def _one_thread() -> None:
+
+def _helper_start() -> None:
+    """A helper runs OpenCV on one thread (the processes share the cores) and ignores interrupts
+    (the run's own process handles them; see the module docstring)."""
+    import signal
+
     import cv2
 
     cv2.setNumThreads(1)
+    for interrupt in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(interrupt, signal.SIG_IGN)
+
+
+def _start_pool(helpers: int) -> tuple[ProcessPoolExecutor, list[Future]]:
+    """A pool of ``helpers`` processes and the futures of their warm-up (``_ready``). The fork server
+    is started (if it is not yet) with SIGINT and SIGTERM ignored, held back meanwhile in this
+    process (``outputs.signals_blocked``): an ignored signal stays ignored through fork and exec, so
+    the fork server and the helpers it forks never act on one (Python installs its KeyboardInterrupt
+    handler only where SIGINT is not ignored); they end when this process does (their pipes close)."""
+    methods = multiprocessing.get_all_start_methods()
+    context = multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
+    if context.get_start_method() == "forkserver":
+        from multiprocessing import forkserver
+
+        with signals_blocked():
+            handlers = {sig: signal.signal(sig, signal.SIG_IGN) for sig in (signal.SIGINT, signal.SIGTERM)}
+            try:
+                forkserver.ensure_running()
+            finally:
+                for sig, handler in handlers.items():
+                    signal.signal(sig, handler)
+    pool = ProcessPoolExecutor(helpers, mp_context=context, initializer=_helper_start)
+    return pool, [pool.submit(_ready) for _ in range(helpers)]
 
 
 def _ready() -> bool:
@@ -68,14 +110,18 @@ def resolve_workers(workers: int | str | None, frames: int) -> int:
     as a whole command (start-up included; farm-bench, 2-core machine, A B A B): 2 workers took
     1.00x the wall time of one on 36 frames (the helper is still starting for most of them), 0.88x on
     60 frames and 0.67x on 120 of 640x480. Under 40 frames a run would wait for a helper that is
-    still starting. More than 2 was not measured: give ``--workers N`` on a bigger machine."""
+    still starting. More than 2 was not measured: give ``--workers N`` on a bigger machine. A number
+    given is capped at the frames and the CPUs (with a warning for the CPUs): each process costs
+    about 200 MB and a second to start, and 99999 of them ran for a quarter of an hour on 2 frames."""
     if workers == "auto":
         workers = None
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     if workers is not None:
         if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
             raise InputError(f"workers: expected a whole number of at least 1, or 'auto' / None, found {workers!r}")
-        return workers
-    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        if workers > cpus:
+            log.warning("--workers %d: this machine gives the run %d CPUs; using %d", workers, cpus, cpus)
+        return max(1, min(workers, cpus, frames))
     return 1 if frames < AUTO_MIN_FRAMES or cpus < 2 else 2
 
 
@@ -86,15 +132,13 @@ def extracted_frames(frames: Iterable[StereoFrame], params: ExtractParams, camer
         for frame in frames:
             yield frame, extract_frame(frame, params, camera_frame, times)
         return
-    methods = multiprocessing.get_all_start_methods()
-    context = multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
     helpers = workers - 1
-    with ProcessPoolExecutor(helpers, mp_context=context, initializer=_one_thread) as pool:
-        ready = [pool.submit(_ready) for _ in range(helpers)]
+    pool, ready = _start_pool(helpers)
+    with pool:
         pending: collections.deque = collections.deque()    # (frame, future of its extraction)
         for frame in frames:
             queued = sum(not work.done() for _, work in pending)
-            if all(r.done() for r in ready) and queued < 2 * helpers:
+            if all(r.done() and r.exception() is None for r in ready) and queued < 2 * helpers:
                 pending.append((frame, pool.submit(_extract, frame, params, camera_frame)))
             else:                      # the helpers are starting or busy: this process takes it
                 done: Future = Future()
