@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import os
 import sys
 
 import click
@@ -38,8 +39,18 @@ class _ClickHandler(logging.Handler):
         click.echo(prefix + record.getMessage(), err=True)
 
 
+class _Interrupted(Exception):
+    """An interrupt inside a command, past click (which would print an empty line on stderr first)."""
+
+
 class AccumGroup(click.Group):
     """Maps the library's errors and click's usage errors to one line and exit 1."""
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except KeyboardInterrupt as e:
+            raise _Interrupted() from e
 
     def main(self, args=None, prog_name=None, **extra):
         extra.pop("standalone_mode", None)
@@ -55,7 +66,7 @@ class AccumGroup(click.Group):
         except AccumError as e:
             click.echo(f"error: {e}", err=True)
             code = 1
-        except (KeyboardInterrupt, click.Abort, SystemError) as e:
+        except (KeyboardInterrupt, _Interrupted, click.Abort, SystemError) as e:
             if isinstance(e, SystemError) and not caused_by_interrupt(e):
                 raise          # a SystemError is an interrupt only when compiled code wrapped one; else a bug
             click.echo("error: interrupted", err=True)
@@ -142,12 +153,34 @@ def _quiet() -> bool:
     return bool(click.get_current_context().find_root().meta.get("quiet"))
 
 
+def _stdout_is_an_output() -> bool:
+    """Whether an option of the running command names this process's stdout (``-o /dev/stdout``)."""
+    values = []
+    for value in click.get_current_context().params.values():
+        values += value if isinstance(value, (list, tuple)) else [value]
+    try:
+        out = os.fstat(sys.stdout.fileno())
+    except (OSError, ValueError):
+        return False
+    for value in values:
+        if isinstance(value, str) and value:
+            try:
+                found = os.stat(value)
+            except (OSError, ValueError):
+                continue
+            if (found.st_dev, found.st_ino) == (out.st_dev, out.st_ino):
+                return True
+    return False
+
+
 def _report(lines, product: bool = False) -> None:
     """Print a run's report on stdout (not with -q), or with ``product`` what the command exists to
-    print (info's summary: printed whatever -q)."""
+    print (info's summary: printed whatever -q); on stderr when an output is stdout (``-o
+    /dev/stdout``: the report would mix with, or overwrite, the output)."""
     if product or not _quiet():
+        err = _stdout_is_an_output()
         for line in lines:
-            click.echo(line)
+            click.echo(line, err=err)
 
 
 def _wrote(paths) -> None:

@@ -178,7 +178,15 @@ def check_kind(path, *expected: str) -> str:
     kind, tag = _sniff(path)
     if kind not in expected:
         wanted = " or ".join(KIND_NAMES[k] for k in expected)
-        raise FileFormatError(f"{path}: expected {wanted}, got {_kind_name(kind, tag)}")
+        got = _kind_name(kind, tag)
+        if kind == "json" and not tag and os.path.getsize(path) < 1 << 26:   # another kind, or no JSON at all?
+            try:
+                with open(path, "rb") as f:
+                    json.loads(f.read().decode("utf-8", errors="replace"))
+            except json.JSONDecodeError as e:
+                if e.msg != "Extra data":   # JSON lines of another kind are JSON
+                    got = f"text that is not valid JSON ({e})"
+        raise FileFormatError(f"{path}: expected {wanted}, got {got}")
     return kind
 
 

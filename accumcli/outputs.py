@@ -24,6 +24,11 @@ Usage::
     # here both files are in place, or (after an exception) neither changed
 
 Outputs never handed out (``open``/``path`` not called) are left untouched.
+
+An output that is not a regular file (a device such as ``/dev/null``, a FIFO, ``/dev/stdout``:
+``is_stream``) is written through, not replaced: renaming a file onto it replaced the device node itself (``--rrd /dev/null``
+as root turned /dev/null into a file) or the FIFO its reader waited on. Such an output is not atomic:
+a run that fails has written part of it.
 """
 
 from __future__ import annotations
@@ -47,7 +52,8 @@ _FAULTS = {errno.ENOSPC: ("no space left on device writing {}", "free some space
            errno.EROFS: ("read-only file system: cannot write {}", "write to another folder"),
            errno.EACCES: ("permission denied writing {}", "choose a folder you can write to"),
            errno.EPERM: ("operation not permitted writing {}", "choose a folder you can write to"),
-           errno.EFBIG: ("file too large writing {}", "write to another file system")}
+           errno.EFBIG: ("file too large writing {}", "write to another file system"),
+           errno.EPIPE: ("the reader of {} closed it before the output was written", "keep it open to the end")}
 
 
 _NO_ROOM = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
@@ -198,12 +204,30 @@ class _GuardedFile:
         return None
 
 
+def is_stream(path) -> bool:
+    """Whether output ``path`` is written through rather than replaced (see the module docstring):
+    an existing device, FIFO or socket, or a name of an open file descriptor (/dev/stdout,
+    /dev/stderr, /dev/fd/N, /proc/.../fd/N: replacing what it resolves to, a regular file a shell
+    redirected to, loses the output)."""
+    given = os.path.abspath(os.fspath(path))
+    if given in ("/dev/stdout", "/dev/stderr") or given.startswith("/dev/fd/") or (
+            given.startswith("/proc/") and "/fd/" in given):
+        return True
+    try:
+        mode = os.stat(given).st_mode
+    except OSError:   # does not exist (yet): a new regular file
+        return False
+    return not (stat.S_ISREG(mode) or stat.S_ISDIR(mode))
+
+
 class _Output:
-    """One output: what the user named, the file that is replaced (a symlink's target), its temp."""
+    """One output: what the user named, the file that is replaced (a symlink's target), its temp;
+    or, for a device, FIFO or stdout (``stream``), the path written through."""
 
     def __init__(self, given: str):
         self.given = given
-        self.target = Path(os.path.realpath(given)) if os.path.islink(given) else Path(given)
+        self.stream = is_stream(given)
+        self.target = Path(os.path.realpath(given)) if os.path.islink(given) and not self.stream else Path(given)
         self.temp: str | None = None
         self.file = None
 
@@ -251,8 +275,10 @@ class OutputSet:
 
     def path(self, path) -> str:
         """The temporary path standing for output ``path`` (created empty, mode 0o600, in the
-        target's folder); whatever is there at commit replaces the target."""
+        target's folder); whatever is there at commit replaces the target. A stream's own path."""
         out = self._output(path)
+        if out.stream:
+            return out.given
         if out.temp is None:
             try:
                 fd, out.temp = tempfile.mkstemp(prefix=TEMP_PREFIX, suffix=TEMP_SUFFIX, dir=out.target.parent)
@@ -271,7 +297,10 @@ class OutputSet:
         if out.file is not None:
             raise RuntimeError(f"{out.given} is already open")
         temp = self.path(path)
-        raw = open(temp, mode, encoding="utf-8" if mode == "w" else None)
+        try:
+            raw = open(temp, mode, encoding="utf-8" if mode == "w" else None)
+        except OSError as e:
+            _raise_output_error(e, out.given)
         out.file = _GuardedFile(raw, out.given)
         return out.file
 
@@ -280,6 +309,10 @@ class OutputSet:
         with SIGINT/SIGTERM held back. Called by ``__exit__`` when the block ends without error; an
         interrupt noted while the compiler ran (``raise_pending_interrupt``) is raised instead."""
         raise_pending_interrupt()
+        for out in self._outputs.values():   # written through: nothing to rename
+            if out.stream and out.file is not None and not out.file.closed:
+                out.file.flush()
+                out.file._file.close()
         used = [o for o in self._outputs.values() if o.temp is not None]
         mask = _umask()
         for out in used:
@@ -341,8 +374,14 @@ class OutputSet:
 
 
 def _check(out: _Output) -> _Output:
-    """``out`` if it can be written; AccumError saying why not (tried with a real temporary file)."""
+    """``out`` if it can be written; AccumError saying why not (tried with a real temporary file;
+    a stream must take writing)."""
     given, target = out.given, out.target
+    if out.stream:
+        if not os.access(given, os.W_OK):
+            what = "does not exist" if not os.path.exists(given) else "is not writable"
+            raise AccumError(f"{given}: {what}; give a file to write")
+        return out
     if given.endswith(os.sep) or os.path.isdir(target):
         raise AccumError(f"{given}: is a folder; give a file name")
     folder = target.parent

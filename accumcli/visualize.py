@@ -109,6 +109,19 @@ def _check_viewer_reachable(url: str) -> None:
                          "start one with `rerun`, or write a file with --rrd") from None
 
 
+def _rrd_problem(path: str, error: Exception) -> str:
+    """Why Rerun's file writer stopped (it says only "File-writer thread shut down prematurely")."""
+    folder = os.path.dirname(os.path.abspath(path))
+    try:
+        space = os.statvfs(folder)
+        free = space.f_bavail * space.f_frsize
+    except OSError:
+        free = None
+    if free is not None and free < 16 << 20:
+        return f"no space left on device writing the Rerun recording in {folder}; free some space or write elsewhere"
+    return f"Rerun could not write the recording in {folder} ({error}); check the disk, or leave out --rrd"
+
+
 class RerunLog:
     """Logs accum's frames, segments and models to one Rerun recording."""
 
@@ -137,7 +150,7 @@ class RerunLog:
                 self.rec.connect_grpc(connect)
             except (RuntimeError, ValueError) as e:   # rerun: an invalid endpoint
                 raise AccumError(f"--connect {connect}: {e}") from None
-        self.connect = connect
+        self.connect, self.rrd = connect, rrd
         self.rec.send_blueprint(layout)
         self.rec.log("world", rr.ViewCoordinates.RDF, static=True)
 
@@ -275,11 +288,13 @@ class RerunLog:
         """Flush everything to the sink and detach from it (an .rrd is complete afterwards)."""
         try:
             self.rec.flush()
-        except RuntimeError as e:   # rerun: the viewer went away, or never answered
-            if self.connect is None:
-                raise
-            raise AccumError(f"the Rerun viewer at {self.connect} did not take the data ({e}); "
-                             "start it with `rerun`, or write a file with --rrd") from None
+        except RuntimeError as e:   # rerun: the viewer went away, or never answered; or the file's disk is full
+            if self.connect is not None:
+                raise AccumError(f"the Rerun viewer at {self.connect} did not take the data ({e}); "
+                                 "start it with `rerun`, or write a file with --rrd") from None
+            if self.rrd is not None:
+                raise AccumError(_rrd_problem(str(self.rrd), e)) from None
+            raise
         self.rec.disconnect()
 
     def __enter__(self) -> "RerunLog":

@@ -130,6 +130,22 @@ def test_quiet_drops_the_run_report_but_not_the_figures(small_recording, tmp_pat
     assert "precision" in run("eval", model, small_recording.replace(".mcap", ".truth.json"), "-q").output
 
 
+def test_an_output_on_stdout_gets_the_output_and_the_report_goes_to_stderr(small_recording, tmp_path):
+    """-o /dev/stdout with stdout a file: the file was replaced (the shell's redirect lost it), then the
+    report overwrote its start. Now the frames go through stdout, whole, and the report to stderr."""
+    import json
+    import subprocess
+    import sys
+
+    with open(tmp_path / "out.jsonl", "wb") as stdout:
+        done = subprocess.run([sys.executable, "-m", "accumcli.cli", "extract", small_recording, "--frames", "0:2",
+                               "-o", "/dev/stdout"], stdout=stdout, stderr=subprocess.PIPE, text=True)
+    assert done.returncode == 0, done.stderr
+    lines = (tmp_path / "out.jsonl").read_text().splitlines()
+    assert len(lines) == 2 and all(json.loads(line)["format"] == "accum.model/1" for line in lines)
+    assert "wrote /dev/stdout" in done.stderr
+
+
 def test_simulate_rejects_bad_options(tmp_path):
     result = run("simulate", "-o", tmp_path / "x.mcap", "--pose-noise", "abc")
     assert result.exit_code == 1 and "expected DEG,MM" in result.output
@@ -294,6 +310,7 @@ def test_eval_refuses_the_truth_of_another_object(small_recording, tmp_path):
     result = run("eval", model, other)
     assert result.exit_code == 1
     assert "the truth is of object frame 'board', the model of 'gripper'" in result.output
+    assert "(or the model of a run with --object-frame board)" in result.output   # eval has no such option
 
 
 def test_a_truth_or_poses_of_other_times_are_refused_everywhere(small_recording, tmp_path):

@@ -262,6 +262,18 @@ def test_readers_refuse_other_kinds(files, reader, given, message):
         reader(files[given])
 
 
+def test_a_broken_json_is_named_as_such(tmp_path):
+    """A truncated JSON was "a JSON file of another kind"."""
+    (tmp_path / "cut.json").write_text('{"segments": [')
+    (tmp_path / "other.json").write_text('{"a": 1}')
+    (tmp_path / "lines.jsonl").write_text('{"a": 1}\n{"a": 2}\n')
+    with pytest.raises(FileFormatError, match=r"got text that is not valid JSON \(Expecting value"):
+        check_kind(tmp_path / "cut.json", "poses")
+    for name in ("other.json", "lines.jsonl"):
+        with pytest.raises(FileFormatError, match="got a JSON file of another kind"):
+            check_kind(tmp_path / name, "poses")
+
+
 def test_check_kind_accepts_several(files):
     assert check_kind(files["poses"], "model", "poses") == "poses"
     with pytest.raises(FileFormatError, match="expected a model JSON .* or a PLY file, got a text file"):

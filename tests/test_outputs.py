@@ -147,6 +147,27 @@ def test_output_error_messages():
     assert output_error(OSError(errno.EBADF, "x"), "a.rrd") is None
 
 
+def test_a_fifo_is_written_through_and_stays_a_fifo(tmp_path):
+    """Renaming a temp onto a FIFO replaced it (its reader waited for good); on a device node (/dev/null
+    as root) it replaced the device. Such an output is written through; a regular file is not."""
+    import stat
+
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    got = []
+    reader = threading.Thread(target=lambda: got.append(open(fifo, "rb").read()))
+    reader.start()
+    with OutputSet([fifo, tmp_path / "m.json"]) as out:
+        assert out.path(fifo) == str(fifo)
+        out.open(fifo, "wb").write(b"frames")
+        out.open(tmp_path / "m.json").write("{}")
+    reader.join(5)
+    assert got == [b"frames"] and stat.S_ISFIFO(os.stat(fifo).st_mode)
+    assert (tmp_path / "m.json").read_text() == "{}"
+    assert outputs.is_stream("/dev/null") and outputs.is_stream("/dev/stdout") and outputs.is_stream(fifo)
+    assert not outputs.is_stream(tmp_path / "m.json") and not outputs.is_stream(tmp_path / "new.json")
+
+
 def test_symlink_stays_a_link_and_mode_is_kept(tmp_path):
     real = tmp_path / "store" / "model.json"
     real.parent.mkdir()

@@ -307,3 +307,22 @@ def test_view_without_a_recording_places_the_models_at_the_poses(small_recording
     first = np.array(rrd_column(str(alone), "world/model/model/accepted", "LineStrips3D:strips")[0], float)
     at_origin = model.select(model.accepted).endpoints().reshape(-1, 3).mean(axis=0)
     assert np.allclose(first.reshape(-1, 3).mean(axis=0), at_origin, atol=1e-5)
+
+
+def test_a_full_disk_under_the_rrd_is_one_error_line(tmp_path, monkeypatch):
+    """Rerun's file writer says only "File-writer thread shut down prematurely" (a traceback before)."""
+    import os
+    from types import SimpleNamespace
+
+    log = RerunLog("accum test", rrd=str(tmp_path / "r.rrd"), kind="view")
+
+    def broken_flush():
+        raise RuntimeError("File-writer thread shut down prematurely")
+
+    monkeypatch.setattr(log.rec, "flush", broken_flush)
+    monkeypatch.setattr(os, "statvfs", lambda folder: SimpleNamespace(f_bavail=3, f_frsize=4096))
+    with pytest.raises(AccumError, match=f"no space left on device writing the Rerun recording in {tmp_path}"):
+        log.close()
+    monkeypatch.setattr(os, "statvfs", lambda folder: SimpleNamespace(f_bavail=1 << 30, f_frsize=4096))
+    with pytest.raises(AccumError, match=r"Rerun could not write the recording .*shut down prematurely"):
+        log.close()

@@ -84,7 +84,7 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
     edges = None
     if truth is not None:
         truth_doc = read_truth(truth)
-        check_truth_matches(truth_doc, options.object_frame, truth)
+        check_truth_matches(truth_doc, options.object_frame, truth, "the run")
         edges = EdgeSamples.of(truth_doc)
     t0 = time.perf_counter()
     with options.open(recording) as rec, files:

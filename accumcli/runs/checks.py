@@ -8,12 +8,14 @@ import numpy as np
 from ..errors import AccumError
 
 
-def check_truth_matches(truth, object_frame: str, truth_path) -> None:
-    """The truth must describe ``object_frame`` (a truth that names no frame is taken as given)."""
+def check_truth_matches(truth, object_frame: str, truth_path, what: str = "the model") -> None:
+    """The truth must describe ``object_frame``, the frame of ``what`` ("the model", "the poses",
+    "the run": the only one that takes --object-frame); a truth that names no frame is taken as given."""
     if truth.object_frame and object_frame and truth.object_frame != object_frame:
-        raise AccumError(f"{truth_path}: the truth is of object frame {truth.object_frame!r}, the model of "
-                         f"{object_frame!r}; give the truth of this recording (or --object-frame "
-                         f"{truth.object_frame})")
+        fix = (f"or --object-frame {truth.object_frame}" if what == "the run" else
+               f"or {what} of a run with --object-frame {truth.object_frame}")
+        raise AccumError(f"{truth_path}: the truth is of object frame {truth.object_frame!r}, {what} of "
+                         f"{object_frame!r}; give the truth of this recording ({fix})")
 
 
 def check_truth_times(truth, times_ns: np.ndarray, tolerance_ns: int, what, truth_path) -> None:

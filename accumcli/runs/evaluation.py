@@ -66,7 +66,7 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
         return figures
     if kind == "poses":
         track = read_poses(path)
-        check_truth_matches(truth, track.child_frame_id, truth_path)
+        check_truth_matches(truth, track.child_frame_id, truth_path, "the poses")
         keep = slice(frames.start, frames.stop)
         times = track.times_ns[keep]
         _check_selected(len(times), len(track.times_ns), frames, path)
