@@ -11,6 +11,7 @@ sizes and modification times and the options) is skipped, so a re-run does only 
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import hashlib
 import io
@@ -102,6 +103,8 @@ def run_task(recording: str, outdir: str, options: BatchOptions) -> dict:
             json.dump({"stamp": stamp, "row": row}, f, allow_nan=False)
     except AccumError as e:
         row["status"] = f"error: {e}"
+        with contextlib.suppress(OSError):   # a recording that failed before any output leaves no folder
+            folder.rmdir()
     return row
 
 

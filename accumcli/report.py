@@ -7,6 +7,8 @@ import json
 
 import numpy as np
 
+from .runs.accumulation import TRACKED_PASSES
+
 
 def info_lines(summary, object_frame: str, camera_frame: str) -> list[str]:
     """``accum info``'s summary of a ``RecordingInfo``."""
@@ -66,7 +68,8 @@ def accumulation_lines(result, motion: str = "gripper") -> list[str]:
     lines = [f"{result.frames} frames accumulated" + (f", {skipped} skipped without a pose" if skipped else "")
              + f": model of {len(result.model)} segments, {result.accepted} accepted (confidence >= 0.5)",
              _times(result.times, result.frames,
-                    "time per frame, its 3 passes together" if motion == "tracked" else "time per frame")]
+                    f"time per frame, its {TRACKED_PASSES} passes together" if motion == "tracked"
+                    else "time per frame")]
     if motion == "tracked":
         lines.append(f"tracked motion: {result.refined_frames} of {result.frames} frames used a refined pose")
     if result.scores:

@@ -35,6 +35,7 @@ def test_one_row_per_recording_and_failures_stay_in_their_row(recordings, tmp_pa
     assert result.rows[0]["frames"] == 3 and result.rows[0]["precision"] > 0.8
     for name in ("a", "b"):
         assert {p.name for p in (tmp_path / name).iterdir()} >= {"model.json", "model.ply", "eval.json", "done.json"}
+    assert not (tmp_path / "broken").exists()   # no empty folder for a recording that failed
     lines = (tmp_path / "summary.csv").read_text().splitlines()
     assert lines[0].startswith("recording,frames,segments,accepted,precision") and len(lines) == 4
     again = run_batch(recordings, tmp_path, OPTIONS, workers=1)

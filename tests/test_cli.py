@@ -530,15 +530,18 @@ def test_detector_choices_are_the_librarys():
 
 
 def test_progress_of_motion_tracked_covers_every_pass(small_recording):
+    """One bar over every pass, each pass's frames weighted by their cost (the first pass, extraction,
+    is 4 of the 10 parts): the bar ends full, not after the first fifth, and its ETA holds early."""
     from accumcli.pipeline import AccumulateParams
     from accumcli.runs import accumulate_recording
-    from accumcli.runs.accumulation import TRACKED_PASSES
+    from accumcli.runs.accumulation import TRACKED_PASS_COST
 
     calls = []
     accumulate_recording(small_recording, params=AccumulateParams(motion="tracked"),
                          progress=lambda done, total: calls.append((done, total)))
-    assert calls[-1] == (6 * TRACKED_PASSES, 6 * TRACKED_PASSES)   # the bar ends full, not after the first fifth
-    assert [done for done, _ in calls] == list(range(1, 6 * TRACKED_PASSES + 1))
+    total = 6 * sum(TRACKED_PASS_COST)
+    assert calls[-1] == (total, total) and len(calls) == 6 * len(TRACKED_PASS_COST)
+    assert calls[5][0] == 6 * TRACKED_PASS_COST[0] == 0.4 * total   # the first pass: 4 tenths
 
 
 @pytest.mark.parametrize("args, message", [

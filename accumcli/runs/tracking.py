@@ -111,6 +111,9 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
                 poses.append(estimate.T_camera_object)
                 status.append(estimate.status)
                 extra.append(estimate.figures())
+                log.debug("frame %d: %s by %s, coverage %.2f, residual %.2f px%s", frame.index, estimate.status,
+                          estimate.method, estimate.coverage, estimate.residual_px,
+                          f" ({estimate.reason})" if estimate.reason else "")
                 if estimate.status == "tracked":
                     trajectory.append(estimate.T_camera_object[:3, 3])
                 if viz:
