@@ -3,6 +3,7 @@ figures, pictures and Rerun log the user asked for."""
 
 from __future__ import annotations
 
+from contextlib import closing
 import collections
 import logging
 import pickle
@@ -125,10 +126,11 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
             with_pose = (lambda: (f for f in counted_frames() if f.T_camera_object is not None))
             store = ExtractionStore()
             poses = tracked_poses(with_pose, params, rec.object_frame, rec.camera_frame, workers, acc.times, store)
+        # closing: an interrupt must end the extraction helpers here, not when the generator is collected
         with rerun_log(files, rrd, "accumulate") as viz, scene_log(files, outputs) as scenes, \
-                LimitedWarnings(log) as no_pose:
-            extractions = (store.replay(frames_with_pose()) if store else
-                           extracted_frames(frames_with_pose(), params.extract, rec.camera_frame, workers, acc.times))
+                LimitedWarnings(log) as no_pose, \
+                closing(store.replay(frames_with_pose()) if store else extracted_frames(
+                    frames_with_pose(), params.extract, rec.camera_frame, workers, acc.times)) as extractions:
             for frame, extraction in extractions:
                 step = acc.step(frame, frame.T_camera_object, extraction,
                                 T_corrected=None if poses is None else poses[frame.index])
@@ -274,8 +276,8 @@ def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str,
         model = accumulation.model()
         return model.select(model.accepted)
 
-    skeleton = accepted(store.record(extracted_frames(frames_with_pose(), params.extract, camera_frame, workers,
-                                                      times)), lambda frame: frame.T_camera_object)
+    with closing(extracted_frames(frames_with_pose(), params.extract, camera_frame, workers, times)) as extractions:
+        skeleton = accepted(store.record(extractions), lambda frame: frame.T_camera_object)
     recorded, links, previous = [], {}, collections.deque(maxlen=motion.span)
     for frame, extraction in store.replay(frames_with_pose()):
         k = len(recorded)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from contextlib import closing
 import time
 from dataclasses import dataclass, field
 
@@ -62,9 +63,10 @@ def extract_recording(recording, output, *, params: ExtractParams = ExtractParam
     rows = RowCheck()
     with options.open(recording, require_pose=False) as rec, outputs:
         total = frames.check(rec)
-        with FramesWriter(outputs.open(output)) as out, rerun_log(outputs, rrd, "extract") as viz:
-            for frame, extraction in extracted_frames(rec.frames(frames.start, frames.stop), params,
-                                                      rec.camera_frame, resolve_workers(workers, total), result.times):
+        with FramesWriter(outputs.open(output)) as out, rerun_log(outputs, rrd, "extract") as viz, \
+                closing(extracted_frames(rec.frames(frames.start, frames.stop), params, rec.camera_frame,
+                                         resolve_workers(workers, total), result.times)) as extractions:
+            for frame, extraction in extractions:
                 header = {"frame_index": frame.index, "counts": extraction.counts,
                           "intrinsics": frame.intrinsics.as_dict()}
                 if with_2d:
