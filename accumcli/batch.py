@@ -132,7 +132,8 @@ def run_batch(recordings, outdir, options: BatchOptions = BatchOptions(), *, wor
         raise InputError(f"two recordings have the same name ({', '.join(twice)}): their outputs would collide")
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise InputError(f"expected at least 1 worker, found {workers}")
-    workers = resolve_workers(workers, len(recordings))   # capped at the recordings and the CPUs
+    if ray_address is None:
+        workers = resolve_workers(workers, len(recordings))   # a local pool: at most the recordings and CPUs
     try:
         Path(outdir).mkdir(parents=True, exist_ok=True)
     except OSError as e:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import functools
 import logging
 import os
+import stat
 import sys
 
 import click
@@ -161,6 +162,8 @@ def _stdout_is_an_output() -> bool:
     try:
         out = os.fstat(sys.stdout.fileno())
     except (OSError, ValueError):
+        return False
+    if stat.S_ISCHR(out.st_mode) and not sys.stdout.isatty():   # /dev/null: nothing to keep apart
         return False
     for value in values:
         if isinstance(value, str) and value:
@@ -491,10 +494,10 @@ def batch(recordings, outdir, track, truth_from_sidecar, workers, ray_address, f
     _report([*table_lines(result.rows), f"{len(result.rows)} recordings in {result.seconds:.1f} s, {result.failed} "
              f"failed; wrote {result.summary}"])
     if result.failed == len(result.rows):
-        raise AccumError("every recording failed (see the status column)")
+        raise AccumError(f"every recording failed (see the status column of {result.summary})")
     if result.failed:
-        raise AccumError(f"{result.failed} of {len(result.rows)} recordings failed (see the status column); "
-                         "the others' outputs are written")
+        raise AccumError(f"{result.failed} of {len(result.rows)} recordings failed (see the status column of "
+                         f"{result.summary}); the others' outputs are written")
 
 
 # -- eval ------------------------------------------------------------------------------------------
@@ -541,7 +544,7 @@ def eval_(inputs, poses, as_json, position_tol, angle_tol, background_dist, min_
         raise click.UsageError("expected INPUT TRUTH.json (INPUT: a model, frames or poses file)")
     tol = Tolerances(position_tol / 1000.0, angle_tol, background_dist / 1000.0, min_seen)
     figures = evaluate_file(inputs[0], inputs[1], tol, frames, support_face, plot)
-    click.echo(dumps(figures, indent=1) if as_json else "\n".join(figures_lines(figures)))
+    _report([dumps(figures, indent=1)] if as_json else figures_lines(figures), product=True)
 
 
 if __name__ == "__main__":

@@ -26,9 +26,10 @@ Usage::
 Outputs never handed out (``open``/``path`` not called) are left untouched.
 
 An output that is not a regular file (a device such as ``/dev/null``, a FIFO, ``/dev/stdout``:
-``is_stream``) is written through, not replaced: renaming a file onto it replaced the device node itself (``--rrd /dev/null``
-as root turned /dev/null into a file) or the FIFO its reader waited on. Such an output is not atomic:
-a run that fails has written part of it.
+``is_stream``) is written into, not replaced: renaming a file onto it replaced the device node
+itself (``--rrd /dev/null`` as root turned /dev/null into a file) or the FIFO its reader waited
+on. Its temporary file is in the system's temporary folder (writers such as MCAP's need to seek)
+and is copied into it at commit, first of the set; a run that fails writes nothing into it.
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+import shutil
 import signal
 import stat
 import tempfile
@@ -204,20 +206,31 @@ class _GuardedFile:
         return None
 
 
+def descriptor_of(path) -> int | None:
+    """The file descriptor a path names (/dev/stdout 1, /dev/stderr 2, /dev/fd/N and this process's
+    /proc/<pid or self>/fd/N: N), or None; through symlinks to such a name."""
+    for name in dict.fromkeys((os.path.abspath(os.fspath(path)), os.path.realpath(path))):
+        if name in ("/dev/stdout", "/dev/stderr"):
+            return 1 if name == "/dev/stdout" else 2
+        parts = name.split("/")
+        if (name.startswith("/dev/fd/") and len(parts) == 4) or (
+                len(parts) == 5 and parts[1] == "proc" and parts[2] in ("self", str(os.getpid())) and parts[3] == "fd"):
+            if parts[-1].isdigit():
+                return int(parts[-1])
+    return None
+
+
 def is_stream(path) -> bool:
     """Whether output ``path`` is written through rather than replaced (see the module docstring):
-    an existing device, FIFO or socket, or a name of an open file descriptor (/dev/stdout,
-    /dev/stderr, /dev/fd/N, /proc/.../fd/N: replacing what it resolves to, a regular file a shell
-    redirected to, loses the output)."""
-    given = os.path.abspath(os.fspath(path))
-    if given in ("/dev/stdout", "/dev/stderr") or given.startswith("/dev/fd/") or (
-            given.startswith("/proc/") and "/fd/" in given):
+    an existing device or FIFO, or a name of an open file descriptor (``descriptor_of``: replacing
+    what it resolves to, a regular file a shell redirected to, loses the output)."""
+    if descriptor_of(path) is not None:
         return True
     try:
-        mode = os.stat(given).st_mode
+        mode = os.stat(path).st_mode
     except OSError:   # does not exist (yet): a new regular file
         return False
-    return not (stat.S_ISREG(mode) or stat.S_ISDIR(mode))
+    return stat.S_ISCHR(mode) or stat.S_ISFIFO(mode) or stat.S_ISBLK(mode) or stat.S_ISSOCK(mode)
 
 
 class _Output:
@@ -249,7 +262,7 @@ class OutputSet:
             if given in self._outputs:
                 raise AccumError(f"{given}: given twice as an output; give each output once")
             self._outputs[given] = _check(_Output(given))
-        targets = [os.path.abspath(o.target) for o in self._outputs.values()]
+        targets = [_identity(o) for o in self._outputs.values()]
         if len(set(targets)) < len(targets):
             raise AccumError(f"two outputs are the same file ({', '.join(self._outputs)}); give each output once")
         for source in inputs:
@@ -275,13 +288,13 @@ class OutputSet:
 
     def path(self, path) -> str:
         """The temporary path standing for output ``path`` (created empty, mode 0o600, in the
-        target's folder); whatever is there at commit replaces the target. A stream's own path."""
+        target's folder, or for a stream in the system's temporary folder); whatever is there at
+        commit replaces the target (is copied into the stream)."""
         out = self._output(path)
-        if out.stream:
-            return out.given
         if out.temp is None:
             try:
-                fd, out.temp = tempfile.mkstemp(prefix=TEMP_PREFIX, suffix=TEMP_SUFFIX, dir=out.target.parent)
+                fd, out.temp = tempfile.mkstemp(prefix=TEMP_PREFIX, suffix=TEMP_SUFFIX,
+                                                dir=None if out.stream else out.target.parent)
             except OSError as e:
                 _raise_output_error(e, out.given)
             os.close(fd)
@@ -309,10 +322,9 @@ class OutputSet:
         with SIGINT/SIGTERM held back. Called by ``__exit__`` when the block ends without error; an
         interrupt noted while the compiler ran (``raise_pending_interrupt``) is raised instead."""
         raise_pending_interrupt()
-        for out in self._outputs.values():   # written through: nothing to rename
-            if out.stream and out.file is not None and not out.file.closed:
-                out.file.flush()
-                out.file._file.close()
+        for out in self._outputs.values():
+            if out.stream and out.temp is not None:
+                self._pour(out)
         used = [o for o in self._outputs.values() if o.temp is not None]
         mask = _umask()
         for out in used:
@@ -336,6 +348,21 @@ class OutputSet:
                     _raise_output_error(e, out.given)
                 out.temp = None
             self._done = True
+
+    def _pour(self, out: _Output) -> None:
+        """Copy a stream's temporary file into it (its descriptor duplicated, for /dev/stdout and the
+        like: reopened by name a shell's redirect was truncated, its >> lost), and remove the temp."""
+        try:
+            if out.file is not None and not out.file.closed:
+                out.file.flush()
+                out.file._file.close()
+            fd = descriptor_of(out.given)
+            with open(out.temp, "rb") as source, open(os.dup(fd) if fd is not None else out.given, "wb") as sink:
+                shutil.copyfileobj(source, sink, 1 << 20)
+        except OSError as e:
+            _raise_output_error(e, out.given)
+        os.unlink(out.temp)
+        out.temp = None
 
     def abandon(self) -> None:
         """Close and remove every temporary file; the targets stay as they were."""
@@ -373,11 +400,26 @@ class OutputSet:
                 raise fault from None
 
 
+def _identity(out: _Output):
+    """What two outputs must not share: a stream's file (device and inode: /dev/stdout and /dev/fd/1
+    are one), else the target's absolute path."""
+    if out.stream:
+        fd = descriptor_of(out.given)
+        with contextlib.suppress(OSError):
+            found = os.fstat(fd) if fd is not None else os.stat(out.given)
+            if fd is None and stat.S_ISCHR(found.st_mode):
+                return ("device", id(out))   # /dev/null for two outputs: both discarded, nothing to mix
+            return ("file", found.st_dev, found.st_ino)
+    return os.path.abspath(out.target)
+
+
 def _check(out: _Output) -> _Output:
     """``out`` if it can be written; AccumError saying why not (tried with a real temporary file;
     a stream must take writing)."""
     given, target = out.given, out.target
     if out.stream:
+        if descriptor_of(given) is None and stat.S_ISSOCK(os.stat(given).st_mode):
+            raise AccumError(f"{given}: is a socket; give a file, a FIFO or /dev/stdout")
         if not os.access(given, os.W_OK):
             what = "does not exist" if not os.path.exists(given) else "is not writable"
             raise AccumError(f"{given}: {what}; give a file to write")

@@ -238,30 +238,34 @@ class RerunLog:
         self.scalars({k: row[k] for k in ACCUMULATE_STATS if k in row})
 
     def recording_frame(self, frame, models: dict, T_camera_object: np.ndarray | None, source: str = "recorded",
-                        truth=None) -> None:
-        """One frame of ``accum view`` on a recording: world = left camera frame (``posed_frame``),
-        and the frame's camera and images."""
+                        truth=None, T_camera_truth: np.ndarray | None = None) -> None:
+        """One frame of ``accum view`` on a recording: world = left camera frame (``posed``), and the
+        frame's camera and images."""
         self.set_frame(frame.index, frame.timestamp_ns)
         self.camera(frame.intrinsics, np.eye(4))
         self.images(frame)
-        self.posed(models, T_camera_object, source, truth)
+        self.posed(models, T_camera_object, source, truth, T_camera_truth)
 
-    def posed(self, models: dict, T_camera_object: np.ndarray | None, source: str, truth=None) -> None:
+    def posed(self, models: dict, T_camera_object: np.ndarray | None, source: str, truth=None,
+              T_camera_truth: np.ndarray | None = None) -> None:
         """At the current time, in world = the left camera frame: each model (name -> Segments) placed
         at the object pose ``T_camera_object`` on ``world/model/<name>`` (so the left image shows it
-        too), and ``truth`` (Segments or None) on ``world/truth``, or both cleared where there is no
-        pose; ``source``, where the pose comes from (a poses file's status and reason), on
-        ``pose_source``."""
+        too), or cleared where there is no pose; ``source``, where the pose comes from (a poses file's
+        status and reason), on ``pose_source``; ``truth`` (Segments or None) on ``world/truth`` at the
+        truth's own pose ``T_camera_truth`` (cleared where it has none), so that a wrong pose shows
+        against it."""
         self.rec.log("pose_source", rr.TextLog(source, level="INFO" if T_camera_object is not None else "WARN"))
+        if truth is not None:
+            if T_camera_truth is None:
+                self.rec.log("world/truth", rr.Clear(recursive=True))
+            else:
+                self.truth(truth, T_camera_truth)
         if T_camera_object is None:
             self.rec.log("world/model", rr.Clear(recursive=True))
-            self.rec.log("world/truth", rr.Clear(recursive=True))
             self.rec.log("world/object", rr.Clear(recursive=False))
             return
         for name, model in models.items():
             self.model(model, T_camera_object, f"world/model/{name}")
-        if truth is not None:
-            self.truth(truth, T_camera_object)
         self.rec.log("world/object", rr.Transform3D(translation=T_camera_object[:3, 3],
                                                     mat3x3=T_camera_object[:3, :3]),
                      rr.TransformAxes3D(0.05))

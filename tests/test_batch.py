@@ -59,8 +59,8 @@ def test_batch_command_prints_the_table_and_exits_1_when_any_fails(recordings, t
     assert "recording" in ok.output.splitlines()[0] and "0 failed" in ok.output
     some = runner.invoke(main, ["batch", *recordings, "-o", str(tmp_path / "o"), "--frames", "0:2", "--workers", "1"])
     assert some.exit_code == 1 and "1 failed" in some.output
-    assert some.output.strip().splitlines()[-1] == ("error: 1 of 3 recordings failed (see the status column); "
-                                                    "the others' outputs are written")
+    assert some.output.strip().splitlines()[-1] == (f"error: 1 of 3 recordings failed (see the status column of "
+                                                    f"{tmp_path / 'o' / 'summary.csv'}); the others' outputs are written")
     bad = runner.invoke(main, ["batch", recordings[2], "-o", str(tmp_path / "p")])
     assert bad.exit_code == 1 and "every recording failed" in bad.output
 

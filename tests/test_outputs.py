@@ -158,7 +158,6 @@ def test_a_fifo_is_written_through_and_stays_a_fifo(tmp_path):
     reader = threading.Thread(target=lambda: got.append(open(fifo, "rb").read()))
     reader.start()
     with OutputSet([fifo, tmp_path / "m.json"]) as out:
-        assert out.path(fifo) == str(fifo)
         out.open(fifo, "wb").write(b"frames")
         out.open(tmp_path / "m.json").write("{}")
     reader.join(5)
@@ -166,6 +165,22 @@ def test_a_fifo_is_written_through_and_stays_a_fifo(tmp_path):
     assert (tmp_path / "m.json").read_text() == "{}"
     assert outputs.is_stream("/dev/null") and outputs.is_stream("/dev/stdout") and outputs.is_stream(fifo)
     assert not outputs.is_stream(tmp_path / "m.json") and not outputs.is_stream(tmp_path / "new.json")
+    assert [outputs.descriptor_of(p) for p in ("/dev/stdout", "/dev/fd/7", "/proc/self/fd/3", "/dev/null")] == \
+        [1, 7, 3, None]
+    with pytest.raises(AccumError, match="two outputs are the same file"):   # one descriptor, two names
+        OutputSet(["/dev/stdout", "/dev/fd/1"])
+    with OutputSet(["/dev/null", "/dev/./null"]):   # discarding two outputs is fine
+        pass
+
+
+def test_a_socket_is_refused(tmp_path):
+    import socket
+
+    path = tmp_path / "s.sock"
+    with socket.socket(socket.AF_UNIX) as s:
+        s.bind(str(path))
+        with pytest.raises(AccumError, match="is a socket; give a file, a FIFO or /dev/stdout"):
+            OutputSet([path])
 
 
 def test_symlink_stays_a_link_and_mode_is_kept(tmp_path):

@@ -69,7 +69,7 @@ def test_auto_workers_use_both_cores_only_for_recordings_long_enough(monkeypatch
     assert resolve_workers(3, 10) == 3 and not caplog.text
     # a number given is capped at the frames, and at the CPUs with a warning (99999 ran for minutes)
     assert resolve_workers(3, 2) == 2 and not caplog.text
-    assert resolve_workers(99999, 100) == 4 and "--workers 99999: this machine gives the run 4 CPUs" in caplog.text
+    assert resolve_workers(99999, 100) == 4 and "--workers 99999: this machine gives the run 4 CPUs; using at most 4" in caplog.text
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0}, raising=False)
     assert resolve_workers(None, 1000) == 1
 

@@ -267,6 +267,8 @@ def test_view_shows_a_trackers_failure_and_every_model(small_recording, tmp_path
     assert not any(p.startswith("world/model/truth") for p in paths)   # the truth is not drawn as a model
     assert rrd_column(str(rrd), "world/truth", "LineStrips3D:colors")[0][0] == \
         int.from_bytes(bytes([*visualize.TRUTH, 255]), "big")
+    # at the truth's own poses, in every frame: a lost or wrong pose shows against it
+    assert len(rrd_column(str(rrd), "world/truth", "LineStrips3D:strips")) == frames
     sources = [row[0] for row in rrd_column(str(rrd), "pose_source", "TextLog:text")]
     assert sources[:3] == ["poses.json: tracked", "poses.json: tracked",
                            "poses.json: lost (coverage 0.10 in both images (needs 0.45))"]

@@ -107,7 +107,7 @@ def resolve_workers(workers: int | str | None, frames: int) -> int:
         if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
             raise InputError(f"workers: expected a whole number of at least 1, or 'auto' / None, found {workers!r}")
         if workers > cpus:
-            log.warning("--workers %d: this machine gives the run %d CPUs; using %d", workers, cpus, cpus)
+            log.warning("--workers %d: this machine gives the run %d CPUs; using at most %d", workers, cpus, cpus)
         return max(1, min(workers, cpus, frames))
     return 1 if frames < AUTO_MIN_FRAMES or cpus < 2 else 2
 

@@ -28,6 +28,7 @@ class ViewInputs:
     recording: str | None = None
     models: dict = field(default_factory=dict)
     truth: Segments | None = None
+    truth_poses: object = None     # the truth file's (``Truth``: its ``pose_at``), where the truth is drawn
     tracks: list = field(default_factory=list)
     track_paths: list = field(default_factory=list)
     frames_files: list = field(default_factory=list)
@@ -51,6 +52,7 @@ class ViewInputs:
                     raise InputError(f"{path}: give at most one truth")
                 inputs.truth = Segments(truth.object_frame, (truth.a + truth.b) / 2, direction / length[:, None],
                                         length, np.ones(len(length)), np.ones(len(length), np.int64))
+                inputs.truth_poses = truth
             elif kind == "poses":
                 inputs.tracks.append(read_poses(path))
                 inputs.track_paths.append(str(path))
@@ -68,6 +70,10 @@ class ViewInputs:
             k += 1
             name = f"{stem}_{k}"
         return name
+
+    def truth_pose(self, t_ns: int) -> np.ndarray | None:
+        """The truth file's own T_camera_object at ``t_ns`` (None: no truth, or no pose then)."""
+        return None if self.truth_poses is None else self.truth_poses.pose_at(int(t_ns))
 
     def check_tracks(self, span_ns, tolerance_ns: int, recording: str) -> None:
         """AccumError when a poses file's times lie outside the recording's (``span_ns``): it would
@@ -133,16 +139,19 @@ def _log_to_rerun(inputs: ViewInputs, rrd, spawn, connect, options, frames, prog
             inputs.check_tracks(rec.time_span_ns, options.tolerance_ns, inputs.recording)
             for done, frame in enumerate(rec.frames(frames.start, frames.stop), 1):
                 T, source = inputs.pose_at(frame.timestamp_ns, frame.T_camera_object, options.tolerance_ns)
-                viz.recording_frame(frame, inputs.models, T, source, inputs.truth)
+                viz.recording_frame(frame, inputs.models, T, source, inputs.truth,
+                                    inputs.truth_pose(frame.timestamp_ns))
                 if T is not None:
                     positions.append(T[:3, 3])
                 progress(done, total)
     elif inputs.tracks:   # world = the camera frame: the models at the poses files' times and poses
         times = np.unique(np.concatenate([track.times_ns for track in inputs.tracks]))
-        for index, t_ns in enumerate(times):
+        chosen = list(enumerate(times))[frames.start:frames.stop]   # --frames: positions among those times
+        for done, (index, t_ns) in enumerate(chosen, 1):
+            progress(done, len(chosen))
             T, source = inputs.pose_at(int(t_ns), None, options.tolerance_ns)
             viz.set_frame(index, int(t_ns))
-            viz.posed(inputs.models, T, source, inputs.truth)
+            viz.posed(inputs.models, T, source, inputs.truth, inputs.truth_pose(int(t_ns)))
             if T is not None:
                 positions.append(T[:3, 3])
     else:   # world = the object frame
