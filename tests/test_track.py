@@ -464,11 +464,13 @@ def test_a_verified_fit_much_worse_than_the_recent_frames_restarts(noisy_pair, m
     assert tracker.update(frames[4]).status == "tracked"
     assert calls == []                                        # ... but far under the limit: no restart
     tracker.params = replace(tracker.params, suspect_limit_share=0.0)
-    assert tracker.update(frames[4]).status == "tracked"
-    assert calls == [4]
+    estimate = tracker.update(frames[4])                      # restarted, and still twice the recent RMS: lost
+    assert calls == [4] and estimate.status == "lost" and "fits worse than the recent frames" in estimate.reason
+    tracker.params = replace(tracker.params, suspect_is_lost=False)
+    assert tracker.update(frames[4]).status == "tracked" and calls == [4, 4]
     tracker._recent_rms.extend([np.median(rms)] * 5)          # as well as this one: no restart
     assert tracker.update(frames[5]).status == "tracked"
-    assert calls == [4]
+    assert calls == [4, 4]
 
 
 def test_a_model_of_another_object_is_lost(noisy_pair, model_of_exact):
