@@ -191,10 +191,12 @@ def test_negative_duplicate_and_out_of_order_timestamps(tmp_path, caplog):
     tf = tf_samples(times=[-2 * PERIOD, -PERIOD, -2 * PERIOD], translations=[(0, 0, 0.4), (0, 0, 0.6), (0, 0, 0.5)])
     path = fuzz.build(tmp_path / "r.mcap", tf=tf, left_times=times, right_times=times)
     frames = frames_of(path)
-    # left and right pair in arrival order; the duplicate pairs with the duplicate
-    assert [f.timestamp_ns for f in frames] == times
+    # left and right pair in arrival order; the duplicate pairs with the duplicate, and that frame is
+    # skipped (both would be placed by the one pose of that time)
+    assert [f.timestamp_ns for f in frames] == times[:2]
+    assert "has the stamp of the frame before it" in caplog.text
     # of the two transform samples at -0.2 s the last one received (z = 0.5) holds
-    assert [round(f.T_camera_object[2, 3], 9) for f in frames] == [0.6, 0.5, 0.5]
+    assert [round(f.T_camera_object[2, 3], 9) for f in frames] == [0.6, 0.5]
 
 
 def test_cycle_in_the_tf_tree_is_a_warning(tmp_path, caplog):
@@ -429,3 +431,25 @@ def test_corrupt_jpeg_that_still_decodes_prints_nothing(capfd):
     msg.data = bytes(data)
     assert decode_image(msg, (160, 120)).shape == (120, 160)
     assert capfd.readouterr().err == ""
+
+
+def test_a_repeated_image_stamp_is_skipped_with_a_warning(tmp_path, caplog):
+    """Two frames with one stamp would both be placed by the pose of that time (a driver that repeats
+    a stamp put a frame at its neighbour's pose without a word)."""
+    from accumcli.recording import Recording, RecordingWriter
+
+    from .helpers import T0, calibration, image
+
+    path = tmp_path / "dup.mcap"
+    with RecordingWriter(path) as w:
+        for side in ("left", "right"):
+            w.calibration(f"/stereo/{side}/calibration", calibration(side), T0)
+        stamps = [T0, T0 + 100_000_000, T0 + 100_000_000, T0 + 200_000_000]
+        for j, t in enumerate(stamps):
+            w.raw_transform("camera_left", "gripper", (0.01 * j, 0.0, 0.5), (0.0, 0.0, 0.0, 1.0), t)
+            w.image("/stereo/left/image", image(j), t, "camera_left")
+            w.image("/stereo/right/image", image(j + 100), t, "camera_right")
+    with Recording(path) as rec:
+        frames = list(rec.frames())
+    assert [f.timestamp_ns for f in frames] == [T0, T0 + 100_000_000, T0 + 200_000_000]
+    assert "has the stamp of the frame before it" in caplog.text and "skipped" in caplog.text

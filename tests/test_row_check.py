@@ -98,3 +98,4 @@ def test_the_command_line_warns_and_takes_the_offset(tmp_path, right_image_low):
     suggested = _suggested(result.output)
     result = CliRunner().invoke(main, ["extract", str(SAMPLE), "-o", str(frames), "-q", "--row-offset", str(suggested)])
     assert result.exit_code == 0 and "rows disagree" not in result.output
+

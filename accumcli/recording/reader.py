@@ -572,14 +572,22 @@ class Recording:
         return self.tree.lookup(self.camera_frame, self.object_frame, t_ns, self.tolerance_ns)
 
     def frames(self, start: int = 0, stop: int | None = None) -> Iterator[StereoFrame]:
-        """Stream the stereo frames with index in [start, stop)."""
+        """Stream the stereo frames with index in [start, stop). A frame with the stamp of the frame
+        before it is skipped with a warning: both would be placed by the one pose of that time (a
+        driver that repeats a stamp put a frame at its neighbour's pose, silently)."""
+        previous_ns = None
         with LimitedWarnings(log, prefix=f"{self.path}: ") as warn:
             for index, t_ns, left_msg, right_msg in self._pairs(warn):
+                repeated, previous_ns = t_ns == previous_ns, t_ns
                 if index < start:
                     continue
                 if stop is not None and index >= stop:
                     break
                 where = f"{self.path}: frame {index} ({t_ns * 1e-9:.3f} s)"
+                if repeated:
+                    warn("repeated stamp", "%s: has the stamp of the frame before it (the images' stamps repeat; "
+                         "check the camera driver): skipped", where)
+                    continue
                 rectifier = self.calibration_at(t_ns)
                 size = (rectifier.intrinsics.width, rectifier.intrinsics.height)
                 try:
