@@ -221,7 +221,7 @@ def descriptor_of(path) -> int | None:
 
 
 def is_stream(path) -> bool:
-    """Whether output ``path`` is written through rather than replaced (see the module docstring):
+    """Whether output ``path`` is written into rather than replaced (see the module docstring):
     an existing device or FIFO, or a name of an open file descriptor (``descriptor_of``: replacing
     what it resolves to, a regular file a shell redirected to, loses the output)."""
     if descriptor_of(path) is not None:
@@ -235,7 +235,7 @@ def is_stream(path) -> bool:
 
 class _Output:
     """One output: what the user named, the file that is replaced (a symlink's target), its temp;
-    or, for a device, FIFO or stdout (``stream``), the path written through."""
+    ``stream``: a device, FIFO or stdout, written into at commit (``OutputSet._pour``)."""
 
     def __init__(self, given: str):
         self.given = given

@@ -34,7 +34,6 @@ import collections
 import logging
 import multiprocessing
 import os
-import signal
 from concurrent.futures import Future, ProcessPoolExecutor, wait
 from typing import Iterable, Iterator
 
