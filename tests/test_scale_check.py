@@ -1,0 +1,49 @@
+"""The depth scale's check (``scale_check``): stereo depths a few percent off the recorded motion's
+(a baseline or focal length a little wrong) are named; right ones, or a motion that cannot tell,
+say nothing."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from accumcli.geometry import make_transform, transform_points
+from accumcli.scale_check import ScaleCheck
+from accumcli.segments import Segments
+
+
+def _frames(scale: float, turn_deg: float = 6.0, frames: int = 10, seed: int = 0):
+    """(segments in the camera frame, their depths times ``scale``; T_camera_object) of an object of
+    random segments turning about its centre 0.6 m in front of the camera."""
+    rng = np.random.default_rng(seed)
+    centers = rng.uniform(-0.05, 0.05, (300, 3))
+    directions = rng.normal(size=(300, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    for k in range(frames):
+        rotation = Rotation.from_rotvec([0.0, np.radians(turn_deg) * k, np.radians(turn_deg / 3) * k]).as_matrix()
+        T = make_transform(rotation, [0.02 * np.sin(k), 0.0, 0.6])
+        seen = Segments("camera_left", scale * transform_points(T, centers), directions @ rotation.T,
+                        np.full(300, 0.01), np.ones(300), np.ones(300, np.int64),
+                        {"sigma_direction_rad": np.full(300, 0.01)})
+        yield seen, T
+
+
+def _check(scale: float, **motion) -> ScaleCheck:
+    check = ScaleCheck()
+    for segments, T in _frames(scale, **motion):
+        check.add(segments, T)
+    return check
+
+
+def test_depths_three_percent_long_are_named():
+    check = _check(1.03)
+    assert check.estimate()[0] == 1.03
+    assert "stereo depths are 1.03 times what the recorded motion implies" in check.warning()
+
+
+def test_right_depths_and_a_motion_that_cannot_tell_say_nothing():
+    right = _check(1.0)
+    assert right.estimate()[0] == 1.0 and right.warning() is None
+    still = _check(1.03, turn_deg=0.0)   # no motion: every scale matches alike
+    assert still.estimate() is None or still.estimate()[0] == 1.0
+    assert still.warning() is None
