@@ -28,7 +28,7 @@ from .cli_options import (
     workers_option,
 )
 from .errors import AccumError
-from .outputs import caused_by_interrupt, raise_pending_interrupt
+from .outputs import caused_by_interrupt, names_open_file, raise_pending_interrupt
 
 log = logging.getLogger("accumcli")
 
@@ -160,20 +160,12 @@ def _stdout_is_an_output() -> bool:
     for value in click.get_current_context().params.values():
         values += value if isinstance(value, (list, tuple)) else [value]
     try:
-        out = os.fstat(sys.stdout.fileno())
+        fd = sys.stdout.fileno()
+        if stat.S_ISCHR(os.fstat(fd).st_mode) and not sys.stdout.isatty():   # /dev/null: nothing to keep apart
+            return False
     except (OSError, ValueError):
         return False
-    if stat.S_ISCHR(out.st_mode) and not sys.stdout.isatty():   # /dev/null: nothing to keep apart
-        return False
-    for value in values:
-        if isinstance(value, str) and value:
-            try:
-                found = os.stat(value)
-            except (OSError, ValueError):
-                continue
-            if (found.st_dev, found.st_ino) == (out.st_dev, out.st_ino):
-                return True
-    return False
+    return any(isinstance(value, str) and value and names_open_file(value, fd) for value in values)
 
 
 def _report(lines, product: bool = False) -> None:

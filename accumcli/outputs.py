@@ -220,6 +220,16 @@ def descriptor_of(path) -> int | None:
     return None
 
 
+def names_open_file(path, fd: int) -> bool:
+    """Whether ``path`` is the file open as descriptor ``fd`` (same device and inode; False if either
+    cannot be looked at)."""
+    try:
+        found, open_file = os.stat(path), os.fstat(fd)
+    except (OSError, ValueError, TypeError):
+        return False
+    return (found.st_dev, found.st_ino) == (open_file.st_dev, open_file.st_ino)
+
+
 def is_stream(path) -> bool:
     """Whether output ``path`` is written into rather than replaced (see the module docstring):
     an existing device or FIFO, or a name of an open file descriptor (``descriptor_of``: replacing

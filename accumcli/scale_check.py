@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .geometry import invert
 from .segments import Segments
 
 SCALES = np.round(np.arange(0.90, 1.1001, 0.01), 3)
@@ -66,7 +67,7 @@ class ScaleCheck:
 
     def _count(self, tree, centers, directions, T_b, centers_a, directions_a, T_a) -> None:
         """Matches of frame a's segments in frame b (``tree`` of b's centres) for every scale."""
-        T_ba = T_b @ np.linalg.inv(T_a)          # the recorded motion from a's camera frame to b's
+        T_ba = T_b @ invert(T_a)          # the recorded motion from a's camera frame to b's
         R, t = T_ba[:3, :3], T_ba[:3, 3]
         moved = centers_a @ R.T
         turned = directions_a @ R.T

@@ -23,6 +23,7 @@ size of the recording.
 
 from __future__ import annotations
 
+import errno
 import os
 import shutil
 import socket
@@ -38,6 +39,7 @@ import rerun.blueprint as rrb
 
 from .errors import AccumError
 from .geometry import invert, transform_points
+from .outputs import output_error
 
 PIXEL = 0.5  # accum pixel (u, v) + PIXEL = rerun pixel coordinate
 MATCHED, UNMATCHED = (40, 200, 60), (255, 140, 0)  # RGB of 2D segments with / without a 3D partner
@@ -117,8 +119,8 @@ def _rrd_problem(path: str, error: Exception) -> str:
         free = space.f_bavail * space.f_frsize
     except OSError:
         free = None
-    if free is not None and free < 16 << 20:
-        return f"no space left on device writing the Rerun recording in {folder}; free some space or write elsewhere"
+    if free is not None and free < 16 << 20:   # the message of a full disk under any other output
+        return str(output_error(OSError(errno.ENOSPC, "no space"), f"the Rerun recording in {folder}"))
     return f"Rerun could not write the recording in {folder} ({error}); check the disk, or leave out --rrd"
 
 

@@ -403,23 +403,11 @@ def test_extraction_is_deterministic_across_processes(small_recording, tmp_path)
 def test_an_interrupt_leaves_the_previous_output_and_no_temporary(tmp_path, signum, delay):
     """Ctrl-C or SIGTERM, during the imports or during the work: one line, exit 130, the old model kept."""
     import os
-    import shutil
     import signal
-    import subprocess
-    import sys
-    import time
 
-    accum = shutil.which("accum", path=os.path.dirname(sys.executable)) or shutil.which("accum")
     model = tmp_path / "m.json"
     model.write_text("previous")
-    # as a terminal's foreground command has it: a runner started in the background (``cmd &`` in a
-    # script) ignores SIGINT, and its children would inherit that (Python keeps an ignored SIGINT)
-    process = subprocess.Popen([accum, "accumulate", "sample_data/sim_box.mcap", "-o", str(model)],
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                               cwd=os.path.dirname(os.path.dirname(__file__)),
-                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    _wait_until_it_catches_sigterm(process.pid)
-    time.sleep(delay)
+    process = _accum_started(["accumulate", "sample_data/sim_box.mcap", "-o", str(model)], delay)
     process.send_signal(getattr(signal, signum))
     out, err = process.communicate(timeout=60)
     assert process.returncode == 130, err
@@ -433,19 +421,11 @@ def test_a_signal_to_the_process_group_with_extraction_helpers(tmp_path, signum,
     processes too, which died of it (a BrokenProcessPool traceback, or a helper's KeyboardInterrupt).
     Now one line and exit 130 (or the run had finished), and no process of the group is left."""
     import os
-    import shutil
     import signal
-    import subprocess
-    import sys
     import time
 
-    accum = shutil.which("accum", path=os.path.dirname(sys.executable)) or shutil.which("accum")
-    process = subprocess.Popen([accum, "extract", "sample_data/sim_box.mcap", "-o", str(tmp_path / "f.jsonl"),
-                                "--workers", "2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                               cwd=os.path.dirname(os.path.dirname(__file__)), start_new_session=True,
-                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    _wait_until_it_catches_sigterm(process.pid)
-    time.sleep(delay)
+    process = _accum_started(["extract", "sample_data/sim_box.mcap", "-o", str(tmp_path / "f.jsonl"), "--workers",
+                              "2"], delay, start_new_session=True)
     os.killpg(process.pid, getattr(signal, signum))
     out, err = process.communicate(timeout=60)
     assert "Traceback" not in err, err
@@ -459,6 +439,27 @@ def test_a_signal_to_the_process_group_with_extraction_helpers(tmp_path, signum,
         time.sleep(0.1)
     else:
         pytest.fail("processes of the run's group are left")
+
+
+def _accum_started(args: list, delay: float, **popen):
+    """The ``accum`` command line running ``args`` from the repository, ``delay`` seconds after its
+    SIGTERM handler is in. SIGINT as a terminal's foreground command has it: a runner started in the
+    background (``cmd &`` in a script) ignores SIGINT, and its children would inherit that (Python
+    keeps an ignored SIGINT)."""
+    import os
+    import shutil
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    accum = shutil.which("accum", path=os.path.dirname(sys.executable)) or shutil.which("accum")
+    process = subprocess.Popen([accum, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               cwd=os.path.dirname(os.path.dirname(__file__)),
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL), **popen)
+    _wait_until_it_catches_sigterm(process.pid)
+    time.sleep(delay)
+    return process
 
 
 def _wait_until_it_catches_sigterm(pid: int) -> None:
