@@ -22,6 +22,7 @@ from .cli_options import (
     frames_option,
     library_value,
     number_pair,
+    parse_box,
     parse_pose,
     recording_options,
     frame_workers_option,
@@ -343,12 +344,15 @@ def extract(recording, output, rrd, with_2d, workers, frames, extract_params, op
               help="A segment's direction from the planes through the camera and the segment in all the "
                    "frames that saw it (the object's turn as a wide baseline), or the average of its "
                    "stereo directions (the paper's; the planes trust the poses to about half a degree).")
+@click.option("--box", metavar="X0:X1,Y0:Y1,Z0:Z1", callback=library_value(parse_box),
+              help="Keep only 3D segments centred in this box (metres, object frame): for a fixture, a board "
+                   "or fingers that move with the object. Example: -0.01:0.17,-0.01:0.08,-0.09:0.01.")
 @frame_workers_option
 @frames_option
 @extraction_options
 @recording_options
 def accumulate(recording, outputs, ply_all, rrd, truth, history, plot, png, panel, motion, position_threshold,
-               angle_threshold, view_planes, workers, frames, extract_params, options):
+               angle_threshold, view_planes, box, workers, frames, extract_params, options):
     """Accumulate a model of the object over the recording, with the gripper's known motion.
 
     \b
@@ -367,7 +371,7 @@ def accumulate(recording, outputs, ply_all, rrd, truth, history, plot, png, pane
             raise click.BadParameter(f"expected a .json, .ply or .mcap file, found {path!r}", param_hint="--output")
     line_model = LineModelParams(thresholds=MetricThresholds(position_threshold / 1000.0, angle_threshold),
                                  view_planes=view_planes)
-    params = AccumulateParams(extract=extract_params, line_model=line_model, motion=motion)
+    params = AccumulateParams(extract=extract_params, line_model=line_model, motion=motion, box=box)
     result = run_with_progress("accumulating", accumulate_recording, recording, outputs, params=params,
                                options=options, frames=frames, truth=truth, history=history, plot=plot, rrd=rrd,
                                png=png, panel=panel, ply_all=ply_all, workers=workers)

@@ -146,6 +146,24 @@ def number_pair(text: str, sep: str, form: str, positive: bool = False) -> tuple
     return a, b
 
 
+def parse_box(text: str) -> tuple:
+    """``X0:X1,Y0:Y1,Z0:Z1`` (metres) as ((x0, x1), (y0, y1), (z0, z1)), each min below max."""
+    import math
+
+    from .errors import InputError
+
+    form = "X0:X1,Y0:Y1,Z0:Z1 (metres, object frame)"
+    try:
+        box = tuple(tuple(float(x) for x in part.split(":")) for part in text.split(","))
+    except ValueError:
+        raise InputError(f"expected {form}, found {text!r}") from None
+    if len(box) != 3 or any(len(pair) != 2 for pair in box):
+        raise InputError(f"expected {form}, found {text!r}")
+    if not all(math.isfinite(lo) and math.isfinite(hi) and lo < hi for lo, hi in box):
+        raise InputError(f"expected {form} with each minimum below its maximum, found {text!r}")
+    return box
+
+
 def parse_pose(value):
     """``recording`` (None: the recording's pose) or x,y,z,qx,qy,qz,qw as a (4, 4) T_camera_object."""
     import numpy as np

@@ -84,6 +84,11 @@ def transform_points(T: np.ndarray, points: np.ndarray) -> np.ndarray:
     return points @ T[:3, :3].T + T[:3, 3]
 
 
+def inside_box(points: np.ndarray, box: np.ndarray) -> np.ndarray:
+    """(N,) bool: ``points: (N, 3)`` within ``box: (3, 2)`` (per axis min, max; same frame and unit)."""
+    return np.all((points >= box[:, 0]) & (points <= box[:, 1]), axis=1)
+
+
 def rotate_vectors(T: np.ndarray, vectors: np.ndarray) -> np.ndarray:
     """Rotate ``vectors: (N, 3)`` (directions, no translation) by ``T``."""
     return vectors @ T[:3, :3].T

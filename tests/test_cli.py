@@ -222,6 +222,36 @@ def test_accumulate_then_eval(small_recording, tmp_path):
     assert figures["accepted"] > 20 and figures["precision"] > 0.85 and figures["background"] < 0.05
 
 
+def test_a_box_keeps_the_model_inside_it(small_recording, tmp_path):
+    """--box drops 3D segments centred outside it (object frame) before the update: the boxed model lies
+    in the box and holds about what the whole model holds there; a box around nothing is an error."""
+    import numpy as np
+
+    from accumcli.geometry import inside_box
+    from accumcli.model_io import read_model, read_truth
+
+    truth = read_truth(small_recording.replace(".mcap", ".truth.json"))
+    ends = np.vstack([truth.a, truth.b])
+    box = np.column_stack([ends.min(axis=0) - 0.01, ends.max(axis=0) + 0.01])
+    box[0, 0] = np.median(ends[:, 0])                       # the object's far half in x only
+    text = ",".join(f"{lo:.4f}:{hi:.4f}" for lo, hi in box)
+    whole, boxed = tmp_path / "whole.json", tmp_path / "boxed.json"
+    assert run("accumulate", small_recording, "-o", whole).exit_code == 0
+    result = run("accumulate", small_recording, "-o", boxed, "--box", text)
+    assert result.exit_code == 0, result.output
+    dropped, total = (int(x) for x in result.output.split("box: ")[1].split(" 3D segments")[0].split(" of "))
+    assert 0 < dropped < total
+    inside = read_model(boxed)
+    assert inside_box(inside.centers, box + [[-0.001, 0.001]]).all()
+    everything = read_model(whole)
+    accepted_there = inside_box(everything.centers, box) & everything.accepted
+    assert inside.accepted.sum() >= 0.7 * accepted_there.sum() > 0
+    far = ",".join(f"{lo + 1:.4f}:{hi + 1:.4f}" for lo, hi in box)
+    nothing = run("accumulate", small_recording, "-o", tmp_path / "none.json", "--box", far)
+    assert nothing.exit_code == 1 and "3D segments of 6 frames lay outside --box" in nothing.output
+    assert not (tmp_path / "none.json").exists()
+
+
 def test_no_frame_with_a_pose_is_an_error_not_an_empty_model(tmp_path):
     from . import helpers
 
@@ -267,6 +297,8 @@ def helpers_empty(tmp_path):
     (["-o", "m.txt"], "expected a .json, .ply or .mcap"),
     (["--frames", "10"], "expected START:STOP, found '10' (frame 10 alone is 10:11, the first 10 frames are 0:10)"),
     (["--frames", "5:2"], "expected START < STOP"),
+    (["--box", "0:1,0:1"], "expected X0:X1,Y0:Y1,Z0:Z1 (metres, object frame), found '0:1,0:1'"),
+    (["--box", "0:1,0:1,1:0"], "with each minimum below its maximum"),
     (["--frames", "50:60"], "frames 50:60 select no frame: the recording has 6 stereo frames (0:6)"),
 ])
 def test_accumulate_validates_options(small_recording, tmp_path, monkeypatch, args, message):

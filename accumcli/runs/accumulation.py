@@ -140,6 +140,8 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
                 scale.add(step.extraction.segments, frame.T_camera_object)   # the recorded motion
                 result.distances_m.append(float(np.linalg.norm(frame.T_camera_object[:3, 3])))
                 row = {"frame_index": frame.index, "timestamp_ns": frame.timestamp_ns, **step.stats.__dict__}
+                if params.box is not None:
+                    row["outside_box"] = step.outside_box
                 if step.tracking is not None:
                     row.update(tracking=step.tracking.status, residual_px=step.tracking.residual_px)
                 if edges is not None or viz or scenes:
@@ -236,6 +238,11 @@ def _nothing_accepted(result: AccumulationResult) -> str:
     if result.frames < 2:
         return "one frame confirms no segment (a segment is accepted when a second frame sees it again); give more frames"
     observed = sum(row.get("observed", 0) for row in result.rows) / result.frames
+    outside = sum(row.get("outside_box", 0) for row in result.rows)
+    if observed == 0 and outside:
+        return (f"all {outside} 3D segments of {result.frames} frames lay outside --box: give it in metres in the "
+                f"object's frame (the poses' T_camera_object), the object {np.median(result.distances_m):.3g} m from "
+                "the camera by them")
     if observed == 0:
         return (f"no 3D segment was extracted in {result.frames} frames: check the images (8 bits, or 16 with "
                 "their bit depth) and the calibration")
@@ -275,7 +282,7 @@ def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str,
     def accepted(extractions, pose_of) -> Segments:
         """The accepted segments of an accumulation, with the known motion, of (frame, extraction) pairs,
         each frame placed by ``pose_of(frame)``."""
-        accumulation = LineAccumulation(AccumulateParams(params.extract, averaging, params.rule),
+        accumulation = LineAccumulation(AccumulateParams(params.extract, averaging, params.rule, box=params.box),
                                         object_frame, camera_frame)
         for frame, extraction in extractions:
             accumulation.step(frame, pose_of(frame), extraction)
