@@ -21,8 +21,8 @@ from .cli_options import (
     extraction_options,
     frames_option,
     library_value,
+    box_option,
     number_pair,
-    parse_box,
     parse_pose,
     recording_options,
     frame_workers_option,
@@ -344,9 +344,7 @@ def extract(recording, output, rrd, with_2d, workers, frames, extract_params, op
               help="A segment's direction from the planes through the camera and the segment in all the "
                    "frames that saw it (the object's turn as a wide baseline), or the average of its "
                    "stereo directions (the paper's; the planes trust the poses to about half a degree).")
-@click.option("--box", metavar="X0:X1,Y0:Y1,Z0:Z1", callback=library_value(parse_box),
-              help="Keep only 3D segments centred in this box (metres, object frame): for a fixture, a board "
-                   "or fingers that move with the object. Example: -0.01:0.17,-0.01:0.08,-0.09:0.01.")
+@box_option
 @frame_workers_option
 @frames_option
 @extraction_options
@@ -463,13 +461,14 @@ def view(inputs, rrd, spawn, connect, png, png_frame, frames, options):
 @output_option("outdir", required=True, type=click.Path(file_okay=False), help="Folder of the results.")
 @click.option("--track", is_flag=True, help="Also track each model through its recording (poses.json).")
 @click.option("--truth-from-sidecar", is_flag=True, help="Evaluate each model against NAME.truth.json beside it.")
+@box_option
 @workers_option
 @click.option("--ray", "ray_address", metavar="ADDRESS", help="Run the tasks on a Ray cluster (ray.init(address)); "
               "'local' starts Ray's local cluster. Needs pip install 'accumcli[ray]'.")
 @frames_option
 @extraction_options
 @recording_options
-def batch(recordings, outdir, track, truth_from_sidecar, workers, ray_address, frames, extract_params, options):
+def batch(recordings, outdir, track, truth_from_sidecar, box, workers, ray_address, frames, extract_params, options):
     """Accumulate (and optionally track and evaluate) many recordings: OUTDIR/NAME/ each, summary.csv.
 
     A recording that fails is reported in its row; the others go on, and the exit code is 1 if
@@ -484,7 +483,8 @@ def batch(recordings, outdir, track, truth_from_sidecar, workers, ray_address, f
     from .batch import BatchOptions, run_batch, table_lines
     from .pipeline import AccumulateParams
 
-    batch_options = BatchOptions(AccumulateParams(extract=extract_params), options, frames, track, truth_from_sidecar)
+    batch_options = BatchOptions(AccumulateParams(extract=extract_params, box=box), options, frames, track,
+                                 truth_from_sidecar)
     result = run_with_progress("recordings", run_batch, recordings, outdir, batch_options, workers=workers,
                                ray_address=ray_address)
     _report([*table_lines(result.rows), f"{len(result.rows)} recordings in {result.seconds:.1f} s, {result.failed} "

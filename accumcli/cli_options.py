@@ -164,6 +164,12 @@ def parse_box(text: str) -> tuple:
     return box
 
 
+box_option = click.option(
+    "--box", metavar="X0:X1,Y0:Y1,Z0:Z1", callback=library_value(parse_box),
+    help="Keep only 3D segments centred in this box (metres, object frame): for a fixture, a board or fingers "
+         "that move with the object. Example: -0.01:0.17,-0.01:0.08,-0.09:0.01.")
+
+
 def parse_pose(value):
     """``recording`` (None: the recording's pose) or x,y,z,qx,qy,qz,qw as a (4, 4) T_camera_object."""
     import numpy as np

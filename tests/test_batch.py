@@ -71,3 +71,14 @@ def test_an_output_folder_that_cannot_be_made_is_one_error(recordings, tmp_path)
     result = CliRunner().invoke(main, ["batch", recordings[0], "-o", str(blocker / "batch")])
     assert result.exit_code == 1 and "Traceback" not in result.output
     assert result.output.strip().splitlines()[-1].startswith(f"error: {blocker / 'batch'}: cannot create the output folder")
+
+
+def test_batch_box_reaches_each_run_and_its_outputs(recordings, tmp_path):
+    """--box is an accumulation option like the others: each row's run drops what lies outside it (a box
+    around nothing fails every row, naming the box), and a re-run with another box is not skipped."""
+    runner = CliRunner()
+    args = ["batch", *recordings[:1], "-o", str(tmp_path / "o"), "--frames", "0:3", "--workers", "1"]
+    assert runner.invoke(main, args + ["--box", "-1:1,-1:1,-1:1"]).exit_code == 0
+    far = runner.invoke(main, args + ["--box", "9:10,9:10,9:10"])
+    assert far.exit_code == 1 and "every recording failed" in far.output
+    assert "outside --box" in (tmp_path / "o" / "summary.csv").read_text()
