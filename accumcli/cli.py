@@ -15,6 +15,7 @@ import stat
 import sys
 
 import click
+from click.core import ParameterSource
 
 from . import __version__
 from .cli_options import (
@@ -402,7 +403,8 @@ def track(model_file, recording, outputs, init_pose, rrd, reacquire, poses_topic
     """Estimate the object's pose in every frame from its model and the images.
 
     The recording's pose seeds the first frame only (or --init gives it);
-    after that, poses come from the images alone.
+    after that, poses come from the images alone. The object's frame is
+    the one the model names unless --object-frame is given.
 
     \b
     Example:
@@ -414,10 +416,11 @@ def track(model_file, recording, outputs, init_pose, rrd, reacquire, poses_topic
     for path in outputs:
         if not path.lower().endswith((".json", ".tum", ".mcap")):
             raise click.BadParameter(f"expected a .json, .tum or .mcap file, found {path!r}", param_hint="--output")
+    given = click.get_current_context().get_parameter_source("object_frame") != ParameterSource.DEFAULT
     result = run_with_progress("tracking", track_recording, model_file, recording, outputs, init_pose=init_pose,
                                extract_params=extract_params, options=options, frames=frames,
                                reacquire=reacquire, rrd=rrd, poses_topic=poses_topic,
-                               poses_child_frame=poses_child_frame)
+                               poses_child_frame=poses_child_frame, object_frame_of_model=not given)
     _report(tracking_lines(result))
     _wrote(result.outputs)
 

@@ -1039,11 +1039,11 @@ class PoseTracker:
                 self.params = p = calibrated(p, candidates[0])
                 candidates = [judge(c, p) for c in candidates]
             else:   # a wrong start must not loosen the limits: they wait for the first verified frame
-                self.calibration_refused = (f"the given pose of the first frame does not fit its images "
+                self.calibration_refused = (f"the starting pose of the first frame does not fit its images "
                                             f"(coverage {candidates[0].coverage:.2f} of the visible model, "
                                             f"needs {p.min_coverage}): the residual limits are learnt from "
                                             "the first frame verified with the default ones")
-                self.limits_source = "the defaults (the given first pose did not fit)"
+                self.limits_source = "the defaults (the starting pose did not fit)"
                 self._learn_from_next_verified = True
         if not reacquiring and candidates and not any(c.status == "tracked" for c in candidates) and self.history:
             wide = _refine(self._accepted, frame, self.history[-1][1], p, grads, p.reacquire_search_px,
@@ -1118,7 +1118,7 @@ class PoseTracker:
         if best.status == "tracked" and self._learn_from_next_verified:
             self._learn_from_next_verified = False
             self.params = calibrated(self.params, best)   # verified under the defaults: a right pose
-            self.limits_source = f"frame {frame.index}, the first verified (the given first pose did not fit)"
+            self.limits_source = f"frame {frame.index}, the first verified (the starting pose did not fit)"
         if best.status == "tracked":
             self.history = (self.history + [(frame.timestamp_ns, best.T_camera_object)])[-2:]
             self._recent_rms.append(best.residual_px)

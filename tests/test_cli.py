@@ -618,7 +618,7 @@ def test_library_runs_take_one_path_or_a_list_and_refuse_other_types(small_recor
             call()
 
 
-def test_track_refuses_a_model_of_another_object_frame(small_recording, tmp_path):
+def test_track_takes_the_models_object_frame_and_refuses_another(small_recording, tmp_path):
     import json
 
     model = tmp_path / "m.json"
@@ -626,5 +626,8 @@ def test_track_refuses_a_model_of_another_object_frame(small_recording, tmp_path
     doc = json.loads(model.read_text())
     doc["frame_id"] = "board"
     model.write_text(json.dumps(doc))
-    result = run("track", model, small_recording, "-o", tmp_path / "p.json")
+    result = run("track", model, small_recording, "-o", tmp_path / "p.json", "--object-frame", "gripper")
     assert result.exit_code == 1 and "the model is in frame 'board', the recording's object frame is 'gripper'" in result.output
+    # without --object-frame the model's frame is the object's: this recording has none of that name
+    result = run("track", model, small_recording, "-o", tmp_path / "p.json")
+    assert result.exit_code == 1 and "no transform path from 'camera_left' to 'board'" in result.output

@@ -55,7 +55,7 @@ def test_junction_samples_measure_the_row_offset():
             moved = cv2.warpAffine(frame.right, np.float32([[1, 0, 0], [0, 1, shift]]), frame.right.shape[::-1],
                                    flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
             frame = replace(frame, right=moved)
-            samples.append(junction_samples(extract_frame(frame, ExtractParams()), frame.intrinsics))
+            samples.append(junction_samples(extract_frame(frame, ExtractParams()), frame.intrinsics)[0])
         samples = np.concatenate(samples)
         assert len(samples) >= 10 and abs(np.median(samples) - shift) < 0.06
 
@@ -99,3 +99,24 @@ def test_the_command_line_warns_and_takes_the_offset(tmp_path, right_image_low):
     result = CliRunner().invoke(main, ["extract", str(SAMPLE), "-o", str(frames), "-q", "--row-offset", str(suggested)])
     assert result.exit_code == 0 and "rows disagree" not in result.output
 
+
+
+def test_few_samples_decide_only_from_many_places(monkeypatch):
+    """Under MIN_SAMPLES, samples decide where their junctions lie at many places in the camera's frame
+    and in the object's (a real offset: every junction says it); one junction seen again and again
+    (background the object passes: one place in the camera's frame) does not, however well it agrees."""
+    import accumcli.row_check as rc
+    from accumcli.geometry import make_transform
+
+    def run(offset, camera_point_of_frame):
+        check = rc.RowCheck()
+        for k in range(12):
+            point = camera_point_of_frame(k)
+            monkeypatch.setattr(rc, "junction_samples", lambda *_: (np.array([offset]), point[None, :]))
+            check.add(None, None, make_transform(np.eye(3), [0.01 * k, 0.0, 0.5]))   # the object moves 1 cm a frame
+        return check
+
+    spread_out = run(1.0, lambda k: np.array([0.01 * k, 0.003 * k, 0.5]))
+    assert spread_out.places() == 12 and "lie 1.00 px below" in spread_out.warning()
+    one_place = run(-1.5, lambda k: np.array([0.02, 0.01, 0.5]))
+    assert one_place.places() == 1 and one_place.estimate() is None and one_place.warning() is None

@@ -45,6 +45,12 @@ def test_depths_three_percent_long_are_named():
     assert "stereo depths are 1.03 times what the recorded motion implies" in check.warning()
 
 
+def test_large_scale_errors_are_named_and_beyond_the_range_as_a_bound():
+    assert "stereo depths are 1.20 times" in _check(1.2).warning()
+    assert "stereo depths are at least 1.40 times" in _check(1.42).warning()
+    assert "stereo depths are at most 0.70 times" in _check(0.68).warning()
+
+
 def test_right_depths_and_a_motion_that_cannot_tell_say_nothing():
     right = _check(1.0)
     assert right.estimate()[0] == 1.0 and right.warning() is None

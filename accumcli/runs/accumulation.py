@@ -136,7 +136,7 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
             for frame, extraction in extractions:
                 step = acc.step(frame, frame.T_camera_object, extraction,
                                 T_corrected=None if poses is None else poses[frame.index])
-                rows.add(step.extraction, frame.intrinsics)
+                rows.add(step.extraction, frame.intrinsics, frame.T_camera_object)
                 scale.add(step.extraction.segments, frame.T_camera_object)   # the recorded motion
                 result.distances_m.append(float(np.linalg.norm(frame.T_camera_object[:3, 3])))
                 row = {"frame_index": frame.index, "timestamp_ns": frame.timestamp_ns, **step.stats.__dict__}

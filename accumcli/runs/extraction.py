@@ -79,7 +79,7 @@ def extract_recording(recording, output, *, params: ExtractParams = ExtractParam
                     header["T_camera_object"] = {"translation": np.round(translation, 9).tolist(),
                                                  "rotation_xyzw": np.round(quat, 9).tolist()}
                 out.write(extraction.segments, frame.timestamp_ns, **header)
-                rows.add(extraction, frame.intrinsics)
+                rows.add(extraction, frame.intrinsics, frame.T_camera_object)
                 if viz:
                     viz.extraction(frame, extraction)
                 result.frames += 1

@@ -5,7 +5,7 @@ from __future__ import annotations
 import logging
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -58,14 +58,16 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
                     params: TrackParams = TrackParams(), extract_params: ExtractParams = ExtractParams(),
                     options: RecordingOptions = RecordingOptions(), frames: FrameRange = FrameRange(),
                     reacquire: bool = True, rrd=None, poses_topic: str = "/accum/poses",
-                    poses_child_frame: str | None = None, progress: Progress = no_progress) -> TrackingResult:
+                    poses_child_frame: str | None = None, object_frame_of_model: bool = False,
+                    progress: Progress = no_progress) -> TrackingResult:
     """Track ``model`` (a model path or ``Segments`` in the object frame) through ``recording``.
 
     The first frame starts from ``init_pose`` (T_camera_object, (4, 4)) or else the recording's pose;
     every later frame from the images alone. outputs: ``.json`` (accum.poses/1), ``.tum`` (the
     tracked poses for evo) and/or ``.mcap`` (the tracked poses as FrameTransforms on
     ``poses_topic``, child frame ``poses_child_frame``, default ``<object>_tracked``, so they sit
-    beside the recording's own /tf in Foxglove).
+    beside the recording's own /tf in Foxglove). ``object_frame_of_model``: the object's frame is the
+    one the model names (``options.object_frame`` is not the user's choice but a default).
     """
     outputs, frames = path_list(outputs, "outputs"), frame_range(frames)
     for name, value in (("poses_topic", poses_topic), ("poses_child_frame", poses_child_frame)):
@@ -80,6 +82,9 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
         model_path = "the model"
     if not model.accepted.any():
         raise AccumError(f"{model_path}: the model has no accepted segment (confidence >= 0.5) to track")
+    if object_frame_of_model and model.frame_id and model.frame_id != options.object_frame:
+        log.info("the object's frame is the model's: %s", model.frame_id)
+        options = replace(options, object_frame=model.frame_id)
     if init_pose is not None:
         init_pose = check_transform(init_pose, "init_pose")
     files = OutputSet([*outputs, rrd], inputs=[recording, model_file])
@@ -105,8 +110,9 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
                                                          gradients=shared).segments) if reacquire else None
                 estimate = tracker.update(frame, guess, observe, gradients=shared)
                 if len(times) == 0 and tracker.calibration_refused:
-                    log.warning("%s: frame %d: %s; check --init or the recorded pose", recording, frame.index,
-                                tracker.calibration_refused)
+                    log.warning("%s: frame %d: %s; check that the model is of this object, and the starting pose "
+                                "(%s)", recording, frame.index, tracker.calibration_refused,
+                                "--init" if init_pose is not None else "the recorded one, or give --init")
                 times.append(frame.timestamp_ns)
                 poses.append(estimate.T_camera_object)
                 status.append(estimate.status)
