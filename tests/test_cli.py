@@ -369,6 +369,37 @@ def test_a_truth_or_poses_of_other_times_are_refused_everywhere(small_recording,
     assert not (tmp_path / "m2.json").exists() and not (tmp_path / "v.png").exists()
 
 
+def test_a_truth_of_another_recording_at_the_same_times_is_refused(small_recording, tmp_path):
+    """The truth of another recording made at the same times (another object, its poses a quarter turn
+    away): the run and the frames file's evaluation refuse it by the recorded poses; a model has none,
+    and its evaluation warns that nothing lies on the truth's edges."""
+    import json
+
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+
+    truth = json.loads(open(small_recording.replace(".mcap", ".truth.json")).read())
+    quarter = Rotation.from_euler("z", 90, degrees=True)
+    for pose in truth["poses"]:
+        pose["rotation_xyzw"] = (Rotation.from_quat(pose["rotation_xyzw"]) * quarter).as_quat().tolist()
+        pose["translation"] = (np.asarray(pose["translation"]) + [0.05, 0.0, 0.0]).tolist()
+    for edge in truth["edges"]:
+        edge["a"], edge["b"] = ([x + 0.2 for x in edge[end]] for end in ("a", "b"))
+    other = tmp_path / "other.truth.json"
+    other.write_text(json.dumps(truth))
+    frames, model = tmp_path / "f.jsonl", tmp_path / "m.json"
+    assert run("extract", small_recording, "-o", frames, "--frames", "0:2").exit_code == 0
+    assert run("accumulate", small_recording, "-o", model).exit_code == 0
+    for args in (["eval", frames, other], ["accumulate", small_recording, "-o", tmp_path / "m2.json", "--truth", other]):
+        result = run(*args)
+        assert result.exit_code == 1, args
+        assert "lie a median 90 deg and 50 mm from the truth's: is it the truth of another recording" in result.output
+    assert not (tmp_path / "m2.json").exists()
+    assert run("eval", frames, small_recording.replace(".mcap", ".truth.json")).exit_code == 0
+    result = run("eval", model, other)
+    assert result.exit_code == 0 and "lies on an edge of" in result.output
+
+
 def test_eval_refuses_poses_of_another_recording(small_recording, tmp_path):
     import json
 

@@ -28,11 +28,13 @@ from ..segments import Segments
 from ..surface import faces_of
 from .base import (FrameRange, Progress, RecordingOptions, frame_range, in_frames, no_progress, nothing_done,
                    path_list)
-from .checks import check_same_time, check_truth_matches
+from .checks import check_same_time, check_truth_matches, check_truth_poses
 from .frame_logs import rerun_log, scene_log
 from .parallel import extracted_frames, resolve_workers
 
 log = logging.getLogger("accumcli")
+
+POSES_COMPARED = 5    # the first frames' recorded poses compared with a given truth's (``check_truth_poses``)
 
 
 @dataclass
@@ -97,7 +99,7 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
         workers = resolve_workers(workers, total)
         acc = LineAccumulation(params, rec.object_frame, rec.camera_frame)
         result = AccumulationResult(acc.model(), times=acc.times)
-        step, done, rows, scale = None, 0, RowCheck(), ScaleCheck()
+        step, done, rows, scale, recorded = None, 0, RowCheck(), ScaleCheck(), []
 
         # --motion tracked streams the recording once per pass (``tracked_poses``): one bar over all of
         # them, each pass's frames weighted by what a frame of it costs (``TRACKED_PASS_COST``)
@@ -139,6 +141,10 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
                 rows.add(step.extraction, frame.intrinsics, frame.T_camera_object)
                 scale.add(step.extraction.segments, frame.T_camera_object)   # the recorded motion
                 result.distances_m.append(float(np.linalg.norm(frame.T_camera_object[:3, 3])))
+                if truth is not None and len(recorded) < POSES_COMPARED:
+                    recorded.append((frame.timestamp_ns, frame.T_camera_object))
+                    if len(recorded) == POSES_COMPARED:   # before the run goes on with the truth of another recording
+                        check_truth_poses(truth_doc, *zip(*recorded), "the run", truth, options.tolerance_ns)
                 row = {"frame_index": frame.index, "timestamp_ns": frame.timestamp_ns, **step.stats.__dict__}
                 if params.box is not None:
                     row["outside_box"] = step.outside_box
@@ -158,6 +164,8 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
         if store:
             store.close()
         result.frames = len(result.rows)
+        if truth is not None and 0 < len(recorded) < POSES_COMPARED:
+            check_truth_poses(truth_doc, *zip(*recorded), "the run", truth, options.tolerance_ns)
         if result.frames == 0:
             raise nothing_done(recording, f"no frame{in_frames(frames)} has both images and a pose of "
                                           f"{rec.object_frame!r} in {rec.camera_frame!r}; nothing was accumulated",

@@ -11,11 +11,12 @@ import numpy as np
 from ..errors import InputError
 from ..evaluate import Tolerances, evaluate_frames, evaluate_model, pose_errors
 from ..funnel import funnel
+from ..geometry import transform_from_quat
 from ..model_io import check_kind, load_model_doc, read_frames, read_poses, read_truth, segments_from_dict
 from ..outputs import OutputSet
 from ..surface import faces_of, hidden_face, support_face_problem, surface_scores
 from .base import FrameRange, frame_range
-from .checks import check_same_time, check_truth_matches, check_truth_times
+from .checks import check_same_time, check_truth_matches, check_truth_poses, check_truth_times
 
 TIME_TOLERANCE_NS = 1_000_000
 log = logging.getLogger("accumcli")
@@ -48,6 +49,9 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
             check_same_time(truth.times_ns, span, TIME_TOLERANCE_NS, truth_path,
                             f"the frames {path} was accumulated over")
         figures = evaluate_model(model, truth, tol)
+        if figures.get("accepted") and figures.get("precision") == 0:
+            log.warning("%s: none of its %d accepted segments lies on an edge of %s: is it the truth of this "
+                        "recording?", path, figures["accepted"], truth_path)
         faces = faces_of(truth.meta)
         if faces:
             if support_face is not None and not 0 <= support_face < len(faces):
@@ -79,6 +83,9 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
         if not rows:
             _check_selected(0, sum(1 for _ in read_frames(path)), frames, path)
         check_truth_times(truth, times, TIME_TOLERANCE_NS, path, truth_path)
+        recorded = [(t, row["T_camera_object"]) for t, _, row in rows if isinstance(row.get("T_camera_object"), dict)]
+        check_truth_poses(truth, [t for t, _ in recorded], [_recorded_pose(p) for _, p in recorded], path, truth_path,
+                          TIME_TOLERANCE_NS)
         per_frame = []
         figures = {**evaluate_frames([(t, s) for t, s, _ in rows], truth, tol, per_frame),
                    **funnel(rows, truth, tol)}
@@ -90,6 +97,15 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
                 plot_frames(files.open(plot, "wb"), per_frame, f"accum eval {Path(path).name}: single frames")
         return figures
     raise InputError(f"{path}: expected a model, frames or poses file of accum to evaluate, got a {kind} file")
+
+
+def _recorded_pose(doc: dict) -> np.ndarray | None:
+    """A frames file line's recorded ``T_camera_object`` (4, 4), None where malformed."""
+    try:
+        quat = np.asarray(doc["rotation_xyzw"], float)
+        return transform_from_quat(doc["translation"], quat / np.linalg.norm(quat))
+    except (KeyError, TypeError, ValueError, ZeroDivisionError):
+        return None
 
 
 def _warn_unjudged(figures: dict, path, truth_path) -> dict:
