@@ -60,6 +60,9 @@ def _sidecar(recording: Path) -> Path:
     return recording.with_name(recording.name[: -len(recording.suffix)] + ".truth.json")
 
 
+OUTPUTS = ("done.json", "eval.json", "poses.json", "model.json", "model.ply")   # what a task may write
+
+
 def output_folder(outdir, recording) -> Path:
     """``OUTDIR/NAME``, NAME the recording's file name without its suffix."""
     return Path(outdir) / Path(recording).stem
@@ -78,6 +81,9 @@ def run_task(recording: str, outdir: str, options: BatchOptions) -> dict:
             return {**json.loads(done.read_text())["row"], "skipped": True}
     except (OSError, ValueError):
         pass
+    for name in OUTPUTS:   # an earlier run's (other options) must not stand beside this one's
+        with contextlib.suppress(FileNotFoundError):
+            (folder / name).unlink()
     try:
         folder.mkdir(parents=True, exist_ok=True)
         model_json = folder / "model.json"

@@ -22,6 +22,7 @@ from .cli_options import (
     extraction_options,
     frames_option,
     library_value,
+    lines_option,
     box_option,
     number_pair,
     parse_pose,
@@ -432,7 +433,8 @@ def track(model_file, recording, outputs, init_pose, rrd, reacquire, poses_topic
 @click.option("--spawn", is_flag=True, help="Open the Rerun viewer (where one can run).")
 @click.option("--connect", metavar="URL", help="Send to a running viewer, e.g. rerun+http://127.0.0.1:9876/proxy.")
 @click.option("--png", type=click.Path(dir_okay=False),
-              help="Write a picture: the model (with a recording: one frame, its extraction and the model).")
+              help="Write a picture: every model side by side, over a truth's edges in magenta (with a "
+                   "recording: one frame, its extraction and each model in that camera).")
 @click.option("--png-frame", type=click.IntRange(min=0), help="Frame of the recording for --png (default: middle).")
 @frames_option
 @recording_options
@@ -518,7 +520,7 @@ def batch(recordings, outdir, track, truth_from_sidecar, box, workers, ray_addre
 @click.option("--support-face", type=click.IntRange(min=0), metavar="N",
               help="With a truth that has faces: segments on face N's plane near the object (the board it stands "
                    "on) count as on the body.")
-@frames_option
+@lines_option
 def eval_(inputs, poses, as_json, position_tol, angle_tol, background_dist, min_seen, plot, support_face, frames):
     """Measure a model, frames file or poses file against a truth sidecar.
 

@@ -50,6 +50,10 @@ frame_workers_option = click.option(
 frames_option = click.option("--frames", "frames", default="0:", callback=library_value(_parse_frames),
                              metavar="START:STOP", help="Stereo frames to use (0-based, STOP excluded; "
                              "either side may be empty).")
+lines_option = click.option("--frames", "frames", default="0:", callback=library_value(_parse_frames),
+                            metavar="START:STOP", help="Lines of a frames or poses file to use (0-based, STOP "
+                            "excluded; either side may be empty): the file's lines, not the recording's frame "
+                            "numbers (a frames file of --frames 5:15 has its frame 5 on line 0).")
 
 
 def recording_options(func):

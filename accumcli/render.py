@@ -21,6 +21,7 @@ MAX_GREY = 230       # the lightest grey drawn, so that tentative segments stay 
 SHIFT = 4            # cv2 fixed-point bits: endpoints are drawn with 1/16 px precision
 FONT = cv2.FONT_HERSHEY_SIMPLEX
 LEGEND_BAND = 44     # px at the bottom kept free for the legend when the view is fitted to the model
+TRUTH_BGR = (255, 0, 255)   # a truth's edges, under the model, as Rerun's view draws them (magenta)
 
 
 def confidence_grey(confidence: np.ndarray) -> np.ndarray:
@@ -119,7 +120,7 @@ def fitted_view(model, size: tuple[int, int] = (640, 480)) -> tuple[np.ndarray, 
 
 
 def render_model(model, size: tuple[int, int] = (640, 480), T_view_object: np.ndarray | None = None,
-                 intrinsics=None, legend: bool = True) -> np.ndarray:
+                 intrinsics=None, legend: bool = True, truth_ends: np.ndarray | None = None) -> np.ndarray:
     """The model's segments (object frame) seen by a pinhole camera: (H, W, 3) uint8, white background.
 
     size: (W, H) px. T_view_object: pose of the object in the (optical) view
@@ -127,7 +128,8 @@ def render_model(model, size: tuple[int, int] = (640, 480), T_view_object: np.nd
     ``K`` (e.g. ``StereoIntrinsics``); by default a K at which the accepted
     segments (all if none is) fill 80% of the picture above the legend.
     Grey = 255 (1 - confidence), clipped to [0, 230]; ``legend`` adds counts, a
-    confidence ramp and a scale bar (at the median depth of the segments fitted to).
+    confidence ramp and a scale bar (at the median depth of the segments fitted to). ``truth_ends``:
+    (M, 2, 3) metres, object frame: a truth's edges, drawn thin in magenta under the model.
     """
     w, h = size
     points = _fit_points(model)
@@ -136,12 +138,45 @@ def render_model(model, size: tuple[int, int] = (640, 480), T_view_object: np.nd
         fit_intrinsics(transform_points(T, points), (w, h - LEGEND_BAND if legend else h))
     ends_view = transform_points(T, model.endpoints().reshape(-1, 3)).reshape(-1, 2, 3)
     canvas = np.full((h, w, 3), 255, np.uint8)
+    _draw_truth(canvas, truth_ends, T, K)
     draw_segments(canvas, ends_view, K, confidence_grey(model.confidence))
     if legend:
         z = transform_points(T, points)[:, 2]
         z = z[z > NEAR]
         _legend(canvas, len(model), int(model.accepted.sum()), float(np.median(z)) / K[0, 0] if len(z) else None)
     return canvas
+
+
+def _draw_truth(canvas: np.ndarray, truth_ends: np.ndarray | None, T_view_object: np.ndarray, K: np.ndarray) -> None:
+    """A truth's edges ((M, 2, 3) metres, object frame) thin in magenta, in place."""
+    if truth_ends is None or len(truth_ends) == 0:
+        return
+    ends = transform_points(T_view_object, truth_ends.reshape(-1, 3)).reshape(-1, 2, 3)
+    z = ends[..., 2]
+    uvw = ends[(z > NEAR).all(axis=1)] @ K.T
+    pts = np.rint(np.clip(uvw[..., :2] / uvw[..., 2:], -1e5, 1e5) * (1 << SHIFT)).astype(np.int64)
+    for a, b in pts:
+        cv2.line(canvas, tuple(map(int, a)), tuple(map(int, b)), TRUTH_BGR, 1, cv2.LINE_AA, SHIFT)
+
+
+def render_models(models: dict, size: tuple[int, int] = (640, 480), truth_ends: np.ndarray | None = None) -> np.ndarray:
+    """Several models (name -> ``Segments``, one object frame) side by side in one view fitted to all
+    of their accepted segments, each titled with its name, over a truth's edges if given (as
+    ``render_model``): (H + 22, n W + 4 (n - 1), 3) uint8."""
+    union = np.concatenate([_fit_points(m) for m in models.values()])
+    T = default_view(union)
+    K = fit_intrinsics(transform_points(T, union), (size[0], size[1] - LEGEND_BAND))
+    view = _Intrinsics(K)
+    panels = [_titled(render_model(m, size, T, view, truth_ends=truth_ends), name) for name, m in models.items()]
+    gap = np.full((panels[0].shape[0], 4, 3), 200, np.uint8)
+    return np.hstack([x for panel in panels for x in (panel, gap)][:-1])
+
+
+class _Intrinsics:
+    """A (3, 3) ``K`` where ``render_model`` takes intrinsics."""
+
+    def __init__(self, K: np.ndarray):
+        self.K = K
 
 
 def _titled(image: np.ndarray, title: str, bar: int = 22) -> np.ndarray:
@@ -153,26 +188,30 @@ def _titled(image: np.ndarray, title: str, bar: int = 22) -> np.ndarray:
     return np.vstack([head, image])
 
 
-def render_frame_panel(frame, result, model, T_camera_object: np.ndarray) -> np.ndarray:
+def render_frame_panel(frame, result, model, T_camera_object: np.ndarray, truth_ends: np.ndarray | None = None,
+                       more: dict | None = None) -> np.ndarray:
     """Three panels side by side (the paper's Figure 5), each (H + 22, W) with a title:
     the left input image; the frame's 3D segments (``result.segments``, left camera
     frame) projected into the left camera, black on white; the model (object frame)
-    projected into the same camera at ``T_camera_object``, grey by confidence.
-    Returns (H + 22, 3 W + 8, 3) uint8."""
+    projected into the same camera at ``T_camera_object``, grey by confidence, over a
+    truth's edges (``truth_ends``, (M, 2, 3) metres, object frame) in magenta if given;
+    then one more such panel per model of ``more`` (name -> ``Segments``).
+    Returns (H + 22, (3 + len(more)) W + 4 (2 + len(more)), 3) uint8."""
     K = frame.intrinsics.K
     h, w = frame.left.shape
     thickness = 2 if w >= 320 else 1
     image = cv2.cvtColor(frame.left, cv2.COLOR_GRAY2BGR)
     extracted = np.full((h, w, 3), 255, np.uint8)
     draw_segments(extracted, result.segments.endpoints(), K, np.zeros(len(result.segments)), thickness)
-    projected = np.full((h, w, 3), 255, np.uint8)
-    ends = transform_points(T_camera_object, model.endpoints().reshape(-1, 3)).reshape(-1, 2, 3)
-    draw_segments(projected, ends, K, confidence_grey(model.confidence), thickness)
-    panels = [_titled(image, f"frame {frame.index}"),
-              _titled(extracted, f"{len(result.segments)} 3D segments"),
-              _titled(projected, f"model: {int(model.accepted.sum())}/{len(model)} accepted")]
+    panels = [_titled(image, f"frame {frame.index}"), _titled(extracted, f"{len(result.segments)} 3D segments")]
+    for name, shown in {"model": model, **(more or {})}.items():
+        projected = np.full((h, w, 3), 255, np.uint8)
+        _draw_truth(projected, truth_ends, T_camera_object, K)
+        ends = transform_points(T_camera_object, shown.endpoints().reshape(-1, 3)).reshape(-1, 2, 3)
+        draw_segments(projected, ends, K, confidence_grey(shown.confidence), thickness)
+        panels.append(_titled(projected, f"{name}: {int(shown.accepted.sum())}/{len(shown)} accepted"))
     gap = np.full((panels[0].shape[0], 4, 3), 200, np.uint8)
-    return np.hstack([panels[0], gap, panels[1], gap, panels[2]])
+    return np.hstack([x for panel in panels for x in (panel, gap)][:-1])
 
 
 def write_png(target, image: np.ndarray) -> None:

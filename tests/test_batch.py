@@ -82,3 +82,13 @@ def test_batch_box_reaches_each_run_and_its_outputs(recordings, tmp_path):
     far = runner.invoke(main, args + ["--box", "9:10,9:10,9:10"])
     assert far.exit_code == 1 and "every recording failed" in far.output
     assert "outside --box" in (tmp_path / "o" / "summary.csv").read_text()
+
+
+def test_a_rerun_with_other_options_leaves_no_output_of_the_earlier_one(recordings, tmp_path):
+    """A re-run without --track and without truth must not leave the earlier run's poses.json and
+    eval.json beside its new model (a script would read figures of another model)."""
+    first = BatchOptions(frames=FrameRange(0, 3), track=True, truth_from_sidecar=True)
+    run_batch(recordings[:1], tmp_path, first, workers=1)
+    assert {"poses.json", "eval.json"} <= {p.name for p in (tmp_path / "a").iterdir()}
+    run_batch(recordings[:1], tmp_path, BatchOptions(frames=FrameRange(0, 4)), workers=1)
+    assert {p.name for p in (tmp_path / "a").iterdir()} == {"model.json", "model.ply", "done.json"}

@@ -429,6 +429,23 @@ def test_view_writes_rrd_and_png(small_recording, tmp_path):
     assert nothing.exit_code == 1 and "nothing to do: give --rrd" in nothing.output
 
 
+def test_view_png_draws_every_model_and_the_truth(small_recording, tmp_path):
+    """Every model of the inputs gets its panel (it drew the first alone), the truth's edges lie under each."""
+    import cv2
+
+    first, second = tmp_path / "a.json", tmp_path / "b.json"
+    assert run("accumulate", small_recording, "-o", first, "--frames", "0:3").exit_code == 0
+    assert run("accumulate", small_recording, "-o", second, "--frames", "3:6").exit_code == 0
+    truth = small_recording.replace(".mcap", ".truth.json")
+    for inputs, panels in (([first, second, truth], 2), ([small_recording, first, second, truth], 4)):
+        assert run("view", *inputs, "--png", tmp_path / "v.png").exit_code == 0
+        image = cv2.imread(str(tmp_path / "v.png"))
+        width = 640 if panels == 2 else 320   # the small recording's images are 320 px wide
+        assert image.shape[1] == panels * width + 4 * (panels - 1)
+        magenta = (image[..., 1] < 120) & (image[..., 0] > 200) & (image[..., 2] > 200)
+        assert magenta[:, -width:].sum() > 20
+
+
 @pytest.mark.parametrize("defect, message", [
     ({"corrupt_left": (2,)}, "frame 2 (1.200 s): cannot decode png image bytes"),
     ({"unpaired_right": (1,)}, "has no partner within 1.000 ms: skipped"),

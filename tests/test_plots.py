@@ -30,3 +30,17 @@ def test_eval_plot_of_a_frames_file(small_recording, tmp_path):
     figures = evaluate_file(str(frames), small_recording.replace(".mcap", ".truth.json"), plot=str(tmp_path / "f.png"))
     assert figures["frames"] == 3 and np.isfinite(figures["single_frame_completeness"])
     assert _coloured_pixels(tmp_path / "f.png") > 300
+
+
+def test_eval_plot_numbers_frames_as_the_recording_does(small_recording, tmp_path, monkeypatch):
+    """A frames file of the recording's frames 2 and 3 is drawn at 2 and 3, not at its lines 0 and 1."""
+    import accumcli.plots
+    from accumcli.runs import evaluate_file, extract_recording
+    from accumcli.runs.base import FrameRange
+
+    frames = tmp_path / "f.jsonl"
+    extract_recording(small_recording, [str(frames)], frames=FrameRange(2, 4))
+    drawn = []
+    monkeypatch.setattr(accumcli.plots, "plot_frames", lambda target, rows, title: drawn.extend(rows))
+    evaluate_file(str(frames), small_recording.replace(".mcap", ".truth.json"), plot=str(tmp_path / "p.png"))
+    assert [r["frame_index"] for r in drawn] == [2, 3]

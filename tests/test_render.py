@@ -167,3 +167,19 @@ def test_frame_panel(tmp_path):
     path = tmp_path / "panel.png"
     write_png(path, panel)
     assert np.array_equal(cv2.imread(str(path)), panel)
+
+
+def test_several_models_side_by_side_in_one_view_over_the_truth():
+    """Two models in one view (fitted to both), titled, each over the truth's edges in magenta: the
+    model of the cube's half lies where that half lies in the whole cube's panel."""
+    from accumcli.render import render_models
+
+    whole = cube_model()
+    half = whole.select(whole.centers[:, 0] > 0)
+    image = render_models({"whole": whole, "half": half}, size=(320, 240), truth_ends=whole.endpoints())
+    assert image.shape == (240 + 22, 2 * 320 + 4, 3)
+    left, right = image[22:, :320], image[22:, 324:]
+    magenta = (image[..., 1] < 120) & (image[..., 0] > 200) & (image[..., 2] > 200)
+    assert magenta[22:, 324:].sum() > 300 and magenta[22:, :320].sum() == 0   # the whole model covers all the truth
+    dark_half = right.mean(axis=2) < 100
+    assert dark_half.any() and (left.mean(axis=2) < 100)[dark_half].mean() > 0.9   # same view: it lies on the whole

@@ -89,6 +89,9 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
         per_frame = []
         figures = {**evaluate_frames([(t, s) for t, s, _ in rows], truth, tol, per_frame),
                    **funnel(rows, truth, tol)}
+        index_of = {t: row["frame_index"] for t, _, row in rows if isinstance(row.get("frame_index"), int)}
+        for r in per_frame:   # the recording's frame numbers where the file has them, not the lines'
+            r["frame_index"] = index_of.get(r["timestamp_ns"], r["frame_index"])
         _warn_unjudged(figures, path, truth_path)
         if plot:
             from ..plots import plot_frames

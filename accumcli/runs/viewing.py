@@ -183,13 +183,16 @@ def _log_to_rerun(inputs: ViewInputs, rrd, spawn, connect, options, frames, prog
 def _draw_picture(inputs: ViewInputs, png, png_frame, options) -> None:
     """The model alone, or (with a recording) one frame, its extraction and the model, as in the paper."""
     from ..extract import extract_frame
-    from ..render import render_frame_panel, render_model, write_png
+    from ..render import render_frame_panel, render_model, render_models, write_png
 
-    named = list(inputs.models.values()) or ([inputs.truth] if inputs.truth is not None else [])
-    if not named:
+    if not inputs.models and inputs.truth is None:
         raise InputError("a picture (--png) needs a model among the inputs")
+    # every model, over the truth's edges (the truth alone is drawn as a model)
+    named = inputs.models or {"truth": inputs.truth}
+    truth_ends = inputs.truth.endpoints() if inputs.models and inputs.truth is not None else None
     if not inputs.recording:
-        write_png(png, render_model(named[0]))
+        write_png(png, render_model(*named.values(), truth_ends=truth_ends) if len(named) == 1
+                  else render_models(named, truth_ends=truth_ends))
         return
     with options.open(inputs.recording, require_pose=False) as rec:
         inputs.check_tracks(rec.time_span_ns, options.tolerance_ns, inputs.recording)
@@ -199,6 +202,7 @@ def _draw_picture(inputs: ViewInputs, png, png_frame, options) -> None:
             if T is None:
                 why = "" if source == "recorded" else f" ({source})"
                 raise AccumError(f"{inputs.recording}: frame {wanted} has no pose to place the model{why}")
-            write_png(png, render_frame_panel(frame, extract_frame(frame), named[0], T))
+            first, *others = named.items()
+            write_png(png, render_frame_panel(frame, extract_frame(frame), first[1], T, truth_ends, dict(others)))
             return
         raise AccumError(f"{inputs.recording}: no frame {wanted} (the recording has {rec.frame_count_hint})")
