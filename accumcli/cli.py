@@ -31,7 +31,7 @@ from .cli_options import (
     workers_option,
 )
 from .errors import AccumError
-from .outputs import caused_by_interrupt, names_open_file, raise_pending_interrupt
+from .outputs import caused_by_interrupt, descriptor_of, names_open_file, raise_pending_interrupt
 
 log = logging.getLogger("accumcli")
 
@@ -186,7 +186,25 @@ def _wrote(paths) -> None:
 
 
 recording_arg = functools.partial(click.argument, "recording", type=click.Path())   # a file or a rosbag2 folder
-output_option = functools.partial(click.option, "-o", "--output", type=click.Path(dir_okay=False))
+def _dash_is_stdout(ctx, param, value):
+    """``-o -`` is the standard output, as Unix tools have it (a file named '-' is ``./-``)."""
+    if isinstance(value, tuple):
+        return tuple("/dev/stdout" if v == "-" else v for v in value)
+    return "/dev/stdout" if value == "-" else value
+
+
+def _check_formats(outputs, suffixes: tuple) -> None:
+    """Each output names its format by one of ``suffixes``; the standard output cannot."""
+    for path in outputs:
+        if not path.lower().endswith(suffixes):
+            why = " (the standard output has no name to tell the format by: write a file)" \
+                if descriptor_of(path) is not None else ""
+            raise click.BadParameter(f"expected a {', '.join(suffixes[:-1])} or {suffixes[-1]} file, found "
+                                     f"{path!r}{why}", param_hint="--output")
+
+
+output_option = functools.partial(click.option, "-o", "--output", type=click.Path(dir_okay=False, allow_dash=True),
+                                  callback=_dash_is_stdout)
 
 
 # -- info -----------------------------------------------------------------------------------------
@@ -335,7 +353,7 @@ def extract(recording, output, rrd, with_2d, workers, frames, extract_params, op
               help="gripper: the recorded poses (the paper); tracked: the recorded poses repaired first, in "
                    "passes over the recording (frame-to-frame refinement on the images, fused with the "
                    "recorded poses, then refined on the model they give; the extraction runs once; "
-                   "the whole 1.5 to 3 times the time, the progress bar counts every pass).")
+                   "the whole 1.4 to 3 times the time, the progress bar counts every pass).")
 @click.option("--sp", "position_threshold", type=click.FloatRange(0.1, 50.0), default=3.0, show_default=True,
               metavar="MM",
               help="s_p of the paper's metric (association and merging), millimetres.")
@@ -366,9 +384,7 @@ def accumulate(recording, outputs, ply_all, rrd, truth, history, plot, png, pane
     from .report import accumulation_lines
     from .runs import accumulate_recording
 
-    for path in outputs:
-        if not path.lower().endswith((".json", ".ply", ".mcap")):
-            raise click.BadParameter(f"expected a .json, .ply or .mcap file, found {path!r}", param_hint="--output")
+    _check_formats(outputs, (".json", ".ply", ".mcap"))
     line_model = LineModelParams(thresholds=MetricThresholds(position_threshold / 1000.0, angle_threshold),
                                  view_planes=view_planes)
     params = AccumulateParams(extract=extract_params, line_model=line_model, motion=motion, box=box)
@@ -414,9 +430,7 @@ def track(model_file, recording, outputs, init_pose, rrd, reacquire, poses_topic
     from .report import tracking_lines
     from .runs import track_recording
 
-    for path in outputs:
-        if not path.lower().endswith((".json", ".tum", ".mcap")):
-            raise click.BadParameter(f"expected a .json, .tum or .mcap file, found {path!r}", param_hint="--output")
+    _check_formats(outputs, (".json", ".tum", ".mcap"))
     given = click.get_current_context().get_parameter_source("object_frame") != ParameterSource.DEFAULT
     result = run_with_progress("tracking", track_recording, model_file, recording, outputs, init_pose=init_pose,
                                extract_params=extract_params, options=options, frames=frames,

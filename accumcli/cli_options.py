@@ -187,6 +187,10 @@ def parse_pose(value):
         numbers = [float(x) for x in value.split(",")]
     except ValueError:
         numbers = []
-    if len(numbers) != 7 or not np.isfinite(numbers).all() or np.linalg.norm(numbers[3:]) < 1e-9:
+    if len(numbers) != 7 or not np.isfinite(numbers).all():
         raise InputError(f"expected 'recording' or x,y,z,qx,qy,qz,qw, found {value!r}")
-    return transform_from_quat(numbers[:3], np.array(numbers[3:]) / np.linalg.norm(numbers[3:]))
+    norm = float(np.linalg.norm(numbers[3:]))
+    if abs(norm - 1.0) > 1e-3:   # a typo, or another order of the numbers: not silently normalised
+        raise InputError(f"expected a unit quaternion qx,qy,qz,qw (x,y,z first), found one of norm {norm:.4g} in "
+                         f"{value!r}")
+    return transform_from_quat(numbers[:3], np.array(numbers[3:]) / norm)

@@ -73,6 +73,12 @@ def viewer_executable() -> str:
     return found
 
 
+def model_path(name: str) -> str:
+    """The entity path of a model shown by name (a file's name: spaces and the like escaped, which
+    Rerun otherwise warns of on stderr)."""
+    return f"world/model/{rr.escape_entity_path_part(name)}"
+
+
 def blueprint(kind: str, images: bool = True) -> rrb.Blueprint:
     """Layout for ``kind``: the 3D world and, beside it, the left image with its overlays (and the
     model and truth projected into it) and the right image, and under them time series of
@@ -267,7 +273,7 @@ class RerunLog:
             self.rec.log("world/object", rr.Clear(recursive=False))
             return
         for name, model in models.items():
-            self.model(model, T_camera_object, f"world/model/{name}")
+            self.model(model, T_camera_object, model_path(name))
         self.rec.log("world/object", rr.Transform3D(translation=T_camera_object[:3, 3],
                                                     mat3x3=T_camera_object[:3, :3]),
                      rr.TransformAxes3D(0.05))

@@ -130,9 +130,11 @@ def test_quiet_drops_the_run_report_but_not_the_figures(small_recording, tmp_pat
     assert "precision" in run("eval", model, small_recording.replace(".mcap", ".truth.json"), "-q").output
 
 
-def test_an_output_on_stdout_gets_the_output_and_the_report_goes_to_stderr(small_recording, tmp_path):
+@pytest.mark.parametrize("name", ["/dev/stdout", "-"])
+def test_an_output_on_stdout_gets_the_output_and_the_report_goes_to_stderr(small_recording, tmp_path, name):
     """-o /dev/stdout with stdout a file: the file was replaced (the shell's redirect lost it), then the
-    report overwrote its start. Now the frames go through stdout, whole, and the report to stderr."""
+    report overwrote its start. Now the frames go through stdout, whole, and the report to stderr.
+    ``-o -`` is the same (it wrote a file named '-')."""
     import json
     import subprocess
     import sys
@@ -140,8 +142,9 @@ def test_an_output_on_stdout_gets_the_output_and_the_report_goes_to_stderr(small
     (tmp_path / "out.jsonl").write_text("previous\n")
     with open(tmp_path / "out.jsonl", "ab") as stdout:   # a shell's >>: the file is appended to, not truncated
         done = subprocess.run([sys.executable, "-m", "accumcli.cli", "extract", small_recording, "--frames", "0:2",
-                               "-o", "/dev/stdout"], stdout=stdout, stderr=subprocess.PIPE, text=True)
+                               "-o", name], stdout=stdout, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
     assert done.returncode == 0, done.stderr
+    assert not (tmp_path / "-").exists()
     first, *lines = (tmp_path / "out.jsonl").read_text().splitlines()
     assert first == "previous"
     assert len(lines) == 2 and all(json.loads(line)["format"] == "accum.model/1" for line in lines)
@@ -295,6 +298,7 @@ def helpers_empty(tmp_path):
     (["--depth-range", "2:1"], "expected MIN:MAX"),
     (["-o", "nowhere/m.json"], "the folder nowhere does not exist"),
     (["-o", "m.txt"], "expected a .json, .ply or .mcap"),
+    (["-o", "-"], "(the standard output has no name to tell the format by: write a file)"),
     (["--frames", "10"], "expected START:STOP, found '10' (frame 10 alone is 10:11, the first 10 frames are 0:10)"),
     (["--frames", "5:2"], "expected START < STOP"),
     (["--box", "0:1,0:1"], "expected X0:X1,Y0:Y1,Z0:Z1 (metres, object frame), found '0:1,0:1'"),
@@ -417,6 +421,18 @@ def test_eval_of_a_ply_names_the_kind(small_recording, tmp_path):
     assert run("accumulate", small_recording, "-o", ply, "--frames", "0:2").exit_code == 0
     result = run("eval", ply, small_recording.replace(".mcap", ".truth.json"))
     assert result.exit_code == 1 and "PLY" in result.output and "Traceback" not in result.output
+
+
+def test_view_of_a_model_named_with_spaces_prints_nothing_of_rerun(small_recording, tmp_path):
+    """A model's file name becomes its entity path: spaces unescaped made Rerun warn on stderr."""
+    import subprocess
+    import sys
+
+    model = tmp_path / "my model ü.json"
+    assert run("accumulate", small_recording, "-o", model, "--frames", "0:2").exit_code == 0
+    done = subprocess.run([sys.executable, "-m", "accumcli.cli", "view", str(model), "--rrd", str(tmp_path / "v.rrd")],
+                          capture_output=True, text=True)
+    assert done.returncode == 0 and done.stderr == "" and "wrote" in done.stdout, done.stderr
 
 
 def test_view_writes_rrd_and_png(small_recording, tmp_path):

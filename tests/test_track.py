@@ -205,6 +205,8 @@ def test_track_command_writes_poses_json_and_mcap(noisy_pair, tmp_path):
     assert figures["median_translation_mm"] < 2.0
     bad = runner.invoke(main, ["track", str(model), exact, "-o", str(tmp_path / "p.json"), "--init", "1,2,3"])
     assert bad.exit_code == 1 and "x,y,z,qx,qy,qz,qw" in bad.output
+    bad = runner.invoke(main, ["track", str(model), exact, "-o", str(tmp_path / "p.json"), "--init", "0,0,0.5,0,0,0,2"])
+    assert bad.exit_code == 1 and "expected a unit quaternion qx,qy,qz,qw (x,y,z first), found one of norm 2" in bad.output
     for option in ("--poses-topic", "--poses-child-frame"):   # an empty name was written, or became the default
         bad = runner.invoke(main, ["track", str(model), exact, "-o", str(poses_mcap), option, " "])
         assert bad.exit_code == 1 and f"({option}): expected a name" in bad.output

@@ -128,7 +128,7 @@ def view(paths, *, rrd=None, spawn: bool = False, connect: str | None = None, pn
 
 
 def _log_to_rerun(inputs: ViewInputs, rrd, spawn, connect, options, frames, progress) -> None:
-    from ..visualize import RerunLog
+    from ..visualize import RerunLog, model_path
 
     viz = RerunLog("accum view", rrd=rrd, kind="view", spawn=spawn, connect=connect,
                    images=inputs.recording is not None)
@@ -156,7 +156,7 @@ def _log_to_rerun(inputs: ViewInputs, rrd, spawn, connect, options, frames, prog
                 positions.append(T[:3, 3])
     else:   # world = the object frame
         for name, model in inputs.models.items():
-            viz.model(model, np.eye(4), f"world/model/{name}")
+            viz.model(model, np.eye(4), model_path(name))
         if inputs.truth is not None:
             viz.truth(inputs.truth)
     if positions:
