@@ -901,3 +901,25 @@ def test_a_model_of_parallel_edges_slides_onto_itself_and_a_box_does_not():
     rng = np.random.default_rng(1)
     box = _segments(rng.uniform(-0.03, 0.03, (12, 3)), np.repeat(np.eye(3), 4, axis=0))
     assert slides(box, 0.005) == []
+
+
+def test_ransac_scores_many_poses_at_once_as_one_at_a_time():
+    """``_support_all`` (every hypothesis in one query) counts what ``support_3d`` counts pose by pose."""
+    from scipy.spatial import cKDTree
+    from scipy.spatial.transform import Rotation
+
+    from accumcli.geometry import make_transform, transform_points
+    from accumcli.track import _support_all, support_3d
+
+    rng = np.random.default_rng(3)
+    model = Segments("object", rng.uniform(-0.05, 0.05, (80, 3)), rng.normal(size=(80, 3)), np.full(80, 0.01),
+                     np.ones(80), np.ones(80, np.int64))
+    model.directions /= np.linalg.norm(model.directions, axis=1, keepdims=True)
+    true = make_transform(Rotation.from_rotvec([0.1, -0.2, 0.3]).as_matrix(), [0.01, 0.0, 0.5])
+    seen = model.select(np.arange(60)).transformed(true, "camera")
+    poses = [true] + [make_transform(Rotation.from_rotvec(rng.normal(size=3) * 0.02).as_matrix(),
+                                     [0.01, 0.0, 0.5] + rng.normal(size=3) * 0.002) for _ in range(20)]
+    R, t = np.stack([T[:3, :3] for T in poses]), np.stack([T[:3, 3] for T in poses])
+    tree = cKDTree(seen.centers)
+    each = [support_3d(model, seen, T, tree) for T in poses]
+    assert list(_support_all(model, seen, R, t, tree)) == each and each[0] == 60 and min(each) < 60
