@@ -19,11 +19,11 @@ from click.core import ParameterSource
 
 from . import __version__
 from .cli_options import (
+    box_option,
     extraction_options,
     frames_option,
     library_value,
     lines_option,
-    box_option,
     number_pair,
     parse_pose,
     recording_options,

@@ -9,6 +9,8 @@ OpenCV's drawing functions.
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import cv2
 import numpy as np
 
@@ -30,12 +32,12 @@ def confidence_grey(confidence: np.ndarray) -> np.ndarray:
 
 
 def draw_segments(canvas: np.ndarray, endpoints: np.ndarray, K: np.ndarray, grey: np.ndarray,
-                  thickness: int = 2) -> None:
+                  thickness: int = 2, bgr: tuple | None = None) -> None:
     """Draw segments into ``canvas`` (H, W, 3) uint8, in place.
 
     endpoints: (N, 2, 3) metres in the camera frame of ``K`` (3, 3), optical axes;
-    grey: (N,) grey level per segment. Lighter segments are drawn first, so darker
-    (more confident) ones lie on top. Anti-aliased lines, ``thickness`` px.
+    grey: (N,) grey level per segment, or one colour ``bgr`` for all. Lighter segments are drawn
+    first, so darker (more confident) ones lie on top. Anti-aliased lines, ``thickness`` px.
     """
     if len(endpoints) == 0:
         return
@@ -47,7 +49,7 @@ def draw_segments(canvas: np.ndarray, endpoints: np.ndarray, K: np.ndarray, grey
     levels = np.asarray(grey, float)[keep]
     for k in np.argsort(-levels, kind="stable"):
         g = int(round(levels[k]))
-        cv2.line(canvas, tuple(map(int, pts[k, 0])), tuple(map(int, pts[k, 1])), (g, g, g), thickness,
+        cv2.line(canvas, tuple(map(int, pts[k, 0])), tuple(map(int, pts[k, 1])), bgr or (g, g, g), thickness,
                  cv2.LINE_AA, SHIFT)
 
 
@@ -149,14 +151,15 @@ def render_model(model, size: tuple[int, int] = (640, 480), T_view_object: np.nd
 
 def _draw_truth(canvas: np.ndarray, truth_ends: np.ndarray | None, T_view_object: np.ndarray, K: np.ndarray) -> None:
     """A truth's edges ((M, 2, 3) metres, object frame) thin in magenta, in place."""
-    if truth_ends is None or len(truth_ends) == 0:
-        return
-    ends = transform_points(T_view_object, truth_ends.reshape(-1, 3)).reshape(-1, 2, 3)
-    z = ends[..., 2]
-    uvw = ends[(z > NEAR).all(axis=1)] @ K.T
-    pts = np.rint(np.clip(uvw[..., :2] / uvw[..., 2:], -1e5, 1e5) * (1 << SHIFT)).astype(np.int64)
-    for a, b in pts:
-        cv2.line(canvas, tuple(map(int, a)), tuple(map(int, b)), TRUTH_BGR, 1, cv2.LINE_AA, SHIFT)
+    if truth_ends is not None and len(truth_ends):
+        ends = transform_points(T_view_object, truth_ends.reshape(-1, 3)).reshape(-1, 2, 3)
+        draw_segments(canvas, ends, K, np.zeros(len(ends)), 1, TRUTH_BGR)
+
+
+def _side_by_side(panels: list) -> np.ndarray:
+    """Panels of one height side by side, 4 px of grey between them."""
+    gap = np.full((panels[0].shape[0], 4, 3), 200, np.uint8)
+    return np.hstack([x for panel in panels for x in (panel, gap)][:-1])
 
 
 def render_models(models: dict, size: tuple[int, int] = (640, 480), truth_ends: np.ndarray | None = None) -> np.ndarray:
@@ -166,17 +169,9 @@ def render_models(models: dict, size: tuple[int, int] = (640, 480), truth_ends: 
     union = np.concatenate([_fit_points(m) for m in models.values()])
     T = default_view(union)
     K = fit_intrinsics(transform_points(T, union), (size[0], size[1] - LEGEND_BAND))
-    view = _Intrinsics(K)
-    panels = [_titled(render_model(m, size, T, view, truth_ends=truth_ends), name) for name, m in models.items()]
-    gap = np.full((panels[0].shape[0], 4, 3), 200, np.uint8)
-    return np.hstack([x for panel in panels for x in (panel, gap)][:-1])
-
-
-class _Intrinsics:
-    """A (3, 3) ``K`` where ``render_model`` takes intrinsics."""
-
-    def __init__(self, K: np.ndarray):
-        self.K = K
+    view = SimpleNamespace(K=K)   # what render_model takes as intrinsics
+    return _side_by_side([_titled(render_model(m, size, T, view, truth_ends=truth_ends), name)
+                          for name, m in models.items()])
 
 
 def _titled(image: np.ndarray, title: str, bar: int = 22) -> np.ndarray:
@@ -210,8 +205,7 @@ def render_frame_panel(frame, result, model, T_camera_object: np.ndarray, truth_
         ends = transform_points(T_camera_object, shown.endpoints().reshape(-1, 3)).reshape(-1, 2, 3)
         draw_segments(projected, ends, K, confidence_grey(shown.confidence), thickness)
         panels.append(_titled(projected, f"{name}: {int(shown.accepted.sum())}/{len(shown)} accepted"))
-    gap = np.full((panels[0].shape[0], 4, 3), 200, np.uint8)
-    return np.hstack([x for panel in panels for x in (panel, gap)][:-1])
+    return _side_by_side(panels)
 
 
 def write_png(target, image: np.ndarray) -> None:

@@ -70,9 +70,8 @@ def accumulation_lines(result, motion: str = "gripper") -> list[str]:
              _times(result.times, result.frames,
                     f"time per frame, its {TRACKED_PASSES} passes together" if motion == "tracked"
                     else "time per frame")]
-    outside = sum(row.get("outside_box", 0) for row in result.rows)
     if any("outside_box" in row for row in result.rows):
-        kept = sum(row.get("observed", 0) for row in result.rows)
+        outside, kept = (sum(row.get(key, 0) for row in result.rows) for key in ("outside_box", "observed"))
         lines.append(f"box: {outside} of {outside + kept} 3D segments lay outside it and were dropped")
     if motion == "tracked":
         lines.append(f"tracked motion: {result.refined_frames} of {result.frames} frames used a refined pose")

@@ -50,6 +50,7 @@ from .extract import FrameSegments
 from .geometry import invert, transform_points
 from .grouping import group_range
 from .recording import StereoIntrinsics
+from .stereo import backproject
 
 log = logging.getLogger("accumcli")
 
@@ -117,9 +118,7 @@ def junction_samples(extraction: FrameSegments, intrinsics: StereoIntrinsics) ->
     d_a, d_b = d_center[a] + slope[a] * t_a, d_center[b] + slope[b] * t_b
     cot_gap = line[a, 0] / line[a, 1] - line[b, 0] / line[b, 1]
     ok = near & (np.abs(cot_gap) >= MIN_COT_GAP) & (np.abs(d_a - d_b) <= MAX_JUMP_PX)
-    u, v, d = junction[ok, 0], junction[ok, 1], (d_a[ok] + d_b[ok]) / 2
-    z = intrinsics.fx * intrinsics.baseline / np.maximum(d, 1e-6)
-    points = np.column_stack([(u - intrinsics.cx) * z / intrinsics.fx, (v - intrinsics.cy) * z / intrinsics.fy, z])
+    points = backproject(junction[ok, 0], junction[ok, 1], np.maximum((d_a[ok] + d_b[ok]) / 2, 1e-6), intrinsics)
     return ((d_a - d_b) / cot_gap)[ok], points
 
 
