@@ -200,6 +200,25 @@ def one_to_one(a: np.ndarray, b: np.ndarray, cost: np.ndarray, rounds: int = 4) 
     return np.concatenate(chosen) if chosen else np.zeros(0, np.int64)
 
 
+def disjoint_pairs(a: np.ndarray, b: np.ndarray, cost: np.ndarray, rounds: int = 4) -> np.ndarray:
+    """Indices of pairs (a[k], b[k]) of one set of entities of which no two share an entity, on either
+    side, by ascending cost: ``one_to_one`` with a and b one index space."""
+    chosen = []
+    alive = np.arange(len(a))
+    used = np.zeros(int(max(a.max(initial=-1), b.max(initial=-1))) + 1, bool)
+    for _ in range(rounds):
+        if len(alive) == 0:
+            break
+        ends, costs = np.concatenate([a[alive], b[alive]]), np.concatenate([cost[alive], cost[alive]])
+        cheapest = np.zeros(len(ends), bool)
+        cheapest[best_per_key(ends, costs)] = True
+        mutual = cheapest[:len(alive)] & cheapest[len(alive):]
+        chosen.append(alive[mutual])
+        used[a[alive[mutual]]] = used[b[alive[mutual]]] = True
+        alive = alive[~(used[a[alive]] | used[b[alive]])]
+    return np.concatenate(chosen) if chosen else np.zeros(0, np.int64)
+
+
 def _sharing(model_index: np.ndarray, observed_index: np.ndarray, reach: int = 4):
     """Pairs (i, j), i != j, of model entities that correspond to the same observation."""
     order = np.argsort(observed_index, kind="stable")
@@ -336,14 +355,13 @@ class Accumulator(Generic[E]):
         i, j, cost = i[same], j[same], cost[same]
         if len(i) == 0:
             return 0
-        keep = one_to_one(i, j, cost)
+        # each entity in one merge at most (a chain a <- b <- c waits for the next frame): as one_to_one,
+        # whose two sides were apart, an entity won one merge and lost another, or absorbed two losers
+        # of which numpy's repeated-index += kept one's sums (observations and information lost)
+        keep = disjoint_pairs(i, j, cost)
         i, j = i[keep], j[keep]
         stronger = self.log_odds[i] >= self.log_odds[j]
         winner, loser = np.where(stronger, i, j), np.where(stronger, j, i)
-        winner_unique = ~np.isin(winner, loser)  # a chain a <- b <- c waits for the next frame
-        winner, loser = winner[winner_unique], loser[winner_unique]
-        if len(winner) == 0:
-            return 0
         self.entities = self.entity_type.merge(self.entities, self.entities, winner, loser, None)
         self.log_odds[winner] = np.maximum(self.log_odds[winner], self.log_odds[loser])
         self.observations[winner] += self.observations[loser]

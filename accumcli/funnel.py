@@ -134,16 +134,20 @@ def funnel(frames, truth, tol: Tolerances = Tolerances()) -> dict:
     bits = per_pose_seen(truth, len(edges.points))
     totals: dict[str, int] = {}
     times_correct = np.zeros(len(edges.points), np.int64)
+    projected = 0   # frames without the truth's bits, whose seen samples are projected (no occlusion)
     for t_ns, segments, doc in frames:
         T = truth.pose_at(int(t_ns))
         if T is None:
             continue
-        seen = bits.get(int(t_ns))
+        # the bits of the truth pose that pose_at chose (within its tolerance, not only at the same stamp)
+        seen = bits.get(int(truth.times_ns[np.argmin(np.abs(truth.times_ns - int(t_ns)))]))
+        projected += seen is None
         for key, value in frame_funnel(segments, doc, T, edges, seen, tol, times_correct).items():
             totals[key] = totals.get(key, 0) + value
     n = max(totals.get("seen", 0), 1)
     result = {f"funnel_{stage}": totals[stage] / n for stage in STAGES if stage in totals}
     if edges.counted.any():
         result["funnel_correct_twice"] = float((times_correct[edges.counted] >= 2).mean())
-    result["funnel_seen_from"] = "truth per-frame bits" if bits else "projection (no occlusion)"
+    result["funnel_seen_from"] = ("projection (no occlusion)" if not bits else "truth per-frame bits" if not projected
+                                  else f"truth per-frame bits ({projected} frames by projection, no occlusion)")
     return result

@@ -207,10 +207,17 @@ def _round(values: np.ndarray, digits: int) -> list:
     return np.round(values, digits).tolist()
 
 
+def _confidence_digits(confidence: np.ndarray) -> list:
+    """Confidences to 5 digits, none rounded up onto the acceptance line 0.5 (0.499996 would be read
+    back as an accepted segment)."""
+    rounded = np.round(confidence, 5)
+    return np.where((confidence < 0.5) & (rounded >= 0.5), 0.49999, rounded).tolist()
+
+
 def segments_to_dict(segments: Segments, **header) -> dict:
     """The model-format dictionary of segments (``header`` keys go first, e.g. timestamp_ns)."""
     columns = {"center": _round(segments.centers, 7), "direction": _round(segments.directions, 7),
-               "length": _round(segments.lengths, 7), "confidence": _round(segments.confidence, 5),
+               "length": _round(segments.lengths, 7), "confidence": _confidence_digits(segments.confidence),
                "observations": segments.observations.astype(int).tolist()}
     columns.update({k: (_round(v, 7) if np.issubdtype(v.dtype, np.floating) else v.tolist())
                     for k, v in segments.extra.items()})
@@ -232,7 +239,7 @@ def segments_from_dict(doc: dict, where: str) -> Segments:
     try:
         centers = np.array([r["center"] for r in rows], float).reshape(-1, 3)
         directions = np.array([r["direction"] for r in rows], float).reshape(-1, 3)
-        lengths = np.array([r.get("length", 0.0) for r in rows], float)
+        lengths = np.array([r["length"] for r in rows], float)
         confidence = np.array([r.get("confidence", 1.0) for r in rows], float)
         observations = np.array([r.get("observations", 1) for r in rows], np.int64)
     except (KeyError, TypeError, ValueError, AttributeError) as e:
@@ -242,6 +249,8 @@ def segments_from_dict(doc: dict, where: str) -> Segments:
     norms = np.linalg.norm(directions, axis=1)
     if np.any(norms < 1e-9):
         raise FileFormatError(f"{where}: a segment has a zero direction")
+    if not (np.isfinite(lengths).all() and (lengths > 0).all()):
+        raise FileFormatError(f"{where}: a segment's 'length' must be a positive number of metres")
     extra = {}
     for key in rows[0]:
         if key not in CORE_FIELDS and all(key in r for r in rows):

@@ -9,7 +9,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from accumcli.accumulate import Accumulator, UpdateRule, one_to_one
+from accumcli.accumulate import Accumulator, UpdateRule, _sharing, disjoint_pairs, one_to_one
 from accumcli.geometry import invert, make_transform, transform_points
 from accumcli.line_model import (
     OBSERVATION_ONLY,
@@ -386,3 +386,30 @@ def test_views_within_the_aspect_span_count_as_one_aspect():
     assert direction_known(segments, rules(1.5, 15.0)).tolist() == [False, False, True]
     assert direction_known(segments, rules(1.5, 0.0)).tolist() == [False, True, True]
     assert direction_known(segments, rules(None, 15.0)).all()
+
+
+def test_duplicates_merge_in_disjoint_pairs_and_keep_every_observation():
+    """Three copies of one segment (pairs 0-1, 1-2, 0-2 all the same): an entity takes part in one merge
+    per frame at most, and what survives holds every observation and every view's information (with
+    one_to_one, whose two sides were apart, a winner absorbed two losers and kept one's sums)."""
+    kind = LineSegmentType()
+    context = FrameContext(make_transform(np.eye(3), [0, 0, 0.5]), INTR)
+    copies = Segments("object", np.array([[0, 0, 0], [0.0005, 0, 0], [0.001, 0, 0.0]]), np.tile([0, 1.0, 0], (3, 1)),
+                      np.full(3, 0.01), np.ones(3), np.ones(3, np.int64))
+    for log_odds in ([0.0, 1.0, 0.5], [1.0, 0.0, 0.5]):
+        core = Accumulator(kind, kind.empty("object"))
+        core.entities = kind.concatenate(kind.empty("object"), kind.observe(copies, context))
+        core.log_odds, core.observations = np.array(log_odds), np.array([3, 5, 7])
+        core.views, core.last_confirmed = np.array([4, 6, 8]), np.zeros(3, np.int64)
+        i, j = _sharing(np.array([0, 1, 2]), np.array([0, 0, 0]))
+        merged = core._consolidate(i, j)
+        live = np.isfinite(core.log_odds)
+        assert merged == 1 and live.sum() == 2
+        assert core.observations[live].sum() == 15 and core.entities.extra["weight"][live].sum() == 3
+
+
+def test_disjoint_pairs_share_no_entity_on_either_side():
+    a, b, cost = np.array([0, 1, 0, 3]), np.array([1, 2, 2, 4]), np.array([1.0, 0.5, 2.0, 1.0])
+    chosen = disjoint_pairs(a, b, cost)
+    ends = np.concatenate([a[chosen], b[chosen]])
+    assert sorted(chosen) == [1, 3] and len(set(ends)) == len(ends)

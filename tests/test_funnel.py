@@ -81,3 +81,24 @@ def test_completeness_any_confidence_counts_what_is_not_accepted():
     scores = evaluate_model(model, truth)
     assert scores["accepted"] == 1 and 0.45 <= scores["completeness"] <= 0.55
     assert scores["completeness_any_confidence"] >= 0.98
+
+
+def test_the_truths_seen_bits_are_those_of_the_pose_it_chose_within_the_tolerance():
+    """A frame 0.5 ms from its truth pose takes that pose's bits (10 of 50 samples seen, a segment on 5
+    of them: 0.5), not the projection of every sample (0.1) under the bits' label."""
+    import base64
+
+    from accumcli.geometry import make_transform
+
+    T = make_transform(np.eye(3), [0, 0, 0.5])
+    bits = np.zeros(50, bool)
+    bits[:10] = True
+    truth = Truth("o", "c", np.array([[0, -0.05, 0.0]]), np.array([[0, 0.05, 0.0]]), ["crease"], [np.full(50, 5)],
+                  np.array([True]), np.array([0], np.int64), T[None], {},
+                  {0: base64.b64encode(np.packbits(bits).tobytes()).decode()})
+    intrinsics = dict(fx=800.0, fy=800.0, cx=320.0, cy=240.0, baseline=0.1, width=640, height=480)
+    segment = Segments("cam", np.array([[0, -0.045, 0.5]]), np.array([[0, 1.0, 0]]), np.array([0.01]), np.ones(1),
+                       np.ones(1, np.int64))
+    for t_ns in (0, 500_000):
+        result = funnel([(t_ns, segment, {"intrinsics": intrinsics})], truth)
+        assert result["funnel_correct_3d"] == 0.5 and result["funnel_seen_from"] == "truth per-frame bits", t_ns

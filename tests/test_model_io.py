@@ -40,6 +40,27 @@ def test_model_json_round_trip(tmp_path):
     assert np.allclose(back.extra["sigma_m"], segments.extra["sigma_m"], atol=1e-7)
 
 
+def test_written_confidences_keep_their_side_of_the_acceptance_line(tmp_path):
+    """0.499996 rounded to 5 digits is 0.5: read back, a segment the run did not accept was accepted."""
+    segments = random_segments(3)
+    segments.confidence = np.array([0.499996, 0.5, 0.9])
+    write_model(tmp_path / "m.json", segments)
+    assert list(read_model(tmp_path / "m.json").accepted) == [False, True, True]
+
+
+@pytest.mark.parametrize("length", [0.0, -0.01, None])
+def test_a_segment_without_a_positive_length_is_refused(tmp_path, length):
+    write_model(tmp_path / "m.json", random_segments(2))
+    doc = json.loads((tmp_path / "m.json").read_text())
+    if length is None:
+        del doc["segments"][1]["length"]
+    else:
+        doc["segments"][1]["length"] = length
+    (tmp_path / "m.json").write_text(json.dumps(doc))
+    with pytest.raises(FileFormatError, match="length"):
+        read_model(tmp_path / "m.json")
+
+
 # -- strict JSON -------------------------------------------------------------------------------
 def strict_loads(text: str):
     """json.loads that refuses NaN/Infinity, as strict parsers (JavaScript, Go, serde) do."""
