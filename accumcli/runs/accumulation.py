@@ -23,7 +23,7 @@ from ..motion import MotionParams, corrected, frame_to_frame, fuse, object_segme
 from ..outputs import OutputSet
 from ..pipeline import AccumulateParams, LineAccumulation
 from ..row_check import RowCheck
-from ..scale_check import ScaleCheck
+from ..motion_check import MotionCheck
 from ..segments import Segments
 from ..surface import faces_of
 from .base import (FrameRange, Progress, RecordingOptions, frame_range, in_frames, no_progress, nothing_done,
@@ -46,7 +46,8 @@ class AccumulationResult:
 
     model: Segments
     row_warning: str | None = None   # what the rows' check (``row_check``) found, None when nothing
-    scale_warning: str | None = None   # what the depth scale's check (``scale_check``) found
+    scale_warning: str | None = None   # what the depth scale's check (``motion_check``) found
+    jitter_warning: str | None = None  # what the recorded poses' jitter check (``motion_check``) found
     frames: int = 0
     skipped: dict = field(default_factory=dict)
     rows: list = field(default_factory=list)
@@ -99,7 +100,7 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
         workers = resolve_workers(workers, total)
         acc = LineAccumulation(params, rec.object_frame, rec.camera_frame)
         result = AccumulationResult(acc.model(), times=acc.times)
-        step, done, rows, scale, recorded = None, 0, RowCheck(), ScaleCheck(), []
+        step, done, rows, motion_check, recorded = None, 0, RowCheck(), MotionCheck(), []
 
         # --motion tracked streams the recording once per pass (``tracked_poses``): one bar over all of
         # them, each pass's frames weighted by what a frame of it costs (``TRACKED_PASS_COST``)
@@ -139,7 +140,7 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
                 step = acc.step(frame, frame.T_camera_object, extraction,
                                 T_corrected=None if poses is None else poses[frame.index])
                 rows.add(step.extraction, frame.intrinsics, frame.T_camera_object)
-                scale.add(step.extraction.segments, frame.T_camera_object)   # the recorded motion
+                motion_check.add(step.extraction.segments, frame.T_camera_object)   # the recorded motion
                 result.distances_m.append(float(np.linalg.norm(frame.T_camera_object[:3, 3])))
                 if truth is not None and len(recorded) < POSES_COMPARED:
                     recorded.append((frame.timestamp_ns, frame.T_camera_object))
@@ -176,9 +177,13 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
         if result.accepted == 0:     # nothing claimed: units or frames are likely wrong, or too few frames
             log.warning("%s: the model accepted no segment: %s", recording, _nothing_accepted(result))
         result.row_warning = rows.report(recording, params.extract.stereo.row_offset_px)
-        result.scale_warning = scale.warning()
-        if result.scale_warning:
-            log.warning("%s: %s", recording, result.scale_warning)
+        result.scale_warning = motion_check.scale_warning()
+        # a wrong scale also scatters re-observations: named once, by its cause; --motion tracked repairs jitter
+        if not result.scale_warning and params.motion != "tracked":
+            result.jitter_warning = motion_check.jitter_warning()
+        for text in (result.scale_warning, result.jitter_warning):
+            if text:
+                log.warning("%s: %s", recording, text)
         result.refined_frames = sum(not np.allclose(T, np.eye(4)) for T in acc.T_recorded_model)
         if edges is not None:   # the last row scored this very model
             result.scores = {"segments": result.accepted,

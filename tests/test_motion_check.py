@@ -1,6 +1,6 @@
-"""The depth scale's check (``scale_check``): stereo depths a few percent off the recorded motion's
-(a baseline or focal length a little wrong) are named; right ones, or a motion that cannot tell,
-say nothing."""
+"""The checks of re-observations against the recorded motion (``motion_check``): stereo depths a few
+percent off the recorded motion's (a baseline or focal length a little wrong) are named, and so are
+jittering poses; right ones, or a motion that cannot tell, say nothing."""
 
 from __future__ import annotations
 
@@ -8,32 +8,33 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from accumcli.geometry import make_transform, transform_points
-from accumcli.scale_check import ScaleCheck
+from accumcli.motion_check import MotionCheck
 from accumcli.segments import Segments
 
 
-def _frames(scale: float, turn_deg: float = 6.0, frames: int = 10, seed: int = 0, pose_noise: tuple = (0.0, 0.0)):
+def _frames(scale: float, turn_deg: float = 6.0, frames: int = 10, seed: int = 0, pose_noise: tuple = (0.0, 0.0),
+            count: int = 300):
     """(segments in the camera frame, their depths times ``scale``; T_camera_object) of an object of
     random segments turning about its centre 0.6 m in front of the camera; the recorded pose off the
     true one by ``pose_noise`` (deg, m) RMS per frame."""
     rng = np.random.default_rng(seed)
-    centers = rng.uniform(-0.05, 0.05, (300, 3))
-    directions = rng.normal(size=(300, 3))
+    centers = rng.uniform(-0.05, 0.05, (count, 3))
+    directions = rng.normal(size=(count, 3))
     directions /= np.linalg.norm(directions, axis=1, keepdims=True)
     for k in range(frames):
         rotation = Rotation.from_rotvec([0.0, np.radians(turn_deg) * k, np.radians(turn_deg / 3) * k]).as_matrix()
         T = make_transform(rotation, [0.02 * np.sin(k), 0.0, 0.6])
         seen = Segments("camera_left", scale * transform_points(T, centers), directions @ rotation.T,
-                        np.full(300, 0.01), np.ones(300), np.ones(300, np.int64),
-                        {"sigma_direction_rad": np.full(300, 0.01)})
+                        np.full(count, 0.01), np.ones(count), np.ones(count, np.int64),
+                        {"sigma_direction_rad": np.full(count, 0.01)})
         noise_deg, noise_m = pose_noise
         error = make_transform(Rotation.from_rotvec(rng.normal(size=3) * np.radians(noise_deg) / np.sqrt(3)).as_matrix(),
                                rng.normal(size=3) * noise_m / np.sqrt(3))
         yield seen, T @ error
 
 
-def _check(scale: float, **motion) -> ScaleCheck:
-    check = ScaleCheck()
+def _check(scale: float, **motion) -> MotionCheck:
+    check = MotionCheck()
     for segments, T in _frames(scale, **motion):
         check.add(segments, T)
     return check
@@ -42,29 +43,43 @@ def _check(scale: float, **motion) -> ScaleCheck:
 def test_depths_three_percent_long_are_named():
     check = _check(1.03)
     assert check.estimate()[0] == 1.03
-    assert "stereo depths are 1.03 times what the recorded motion implies" in check.warning()
+    assert "stereo depths are 1.03 times what the recorded motion implies" in check.scale_warning()
 
 
 def test_large_scale_errors_are_named_and_beyond_the_range_as_a_bound():
-    assert "stereo depths are 1.20 times" in _check(1.2).warning()
-    assert "stereo depths are at least 1.40 times" in _check(1.42).warning()
-    assert "stereo depths are at most 0.70 times" in _check(0.68).warning()
+    assert "stereo depths are 1.20 times" in _check(1.2).scale_warning()
+    assert "stereo depths are at least 1.40 times" in _check(1.42).scale_warning()
+    assert "stereo depths are at most 0.70 times" in _check(0.68).scale_warning()
 
 
 def test_right_depths_and_a_motion_that_cannot_tell_say_nothing():
     right = _check(1.0)
-    assert right.estimate()[0] == 1.0 and right.warning() is None
+    assert right.estimate()[0] == 1.0 and right.scale_warning() is None
     still = _check(1.03, turn_deg=0.0)   # no motion: every scale matches alike
     assert still.estimate() is None or still.estimate()[0] == 1.0
-    assert still.warning() is None
+    assert still.scale_warning() is None
 
 
 def test_noisy_recorded_poses_are_not_named_a_calibration_error():
     """Poses 1.5 deg / 4 mm off per frame (make motion's noise) with right depths: the frame pairs'
     best scales split about 1, whatever the sum of their counts peaks at."""
     for seed in range(6):
-        check = ScaleCheck()
+        check = MotionCheck()
         for segments, T in _frames(1.0, frames=30, seed=seed, pose_noise=(1.5, 0.004)):
             check.add(segments, T)
-        assert check.warning() is None, seed
+        assert check.scale_warning() is None, seed
     assert _check(1.03, pose_noise=(0.05, 0.0001)).estimate()[0] == 1.03   # small noise: still named
+
+
+def test_jittering_poses_are_named_and_exact_ones_are_not():
+    """Poses 1.5 deg / 4 mm off per frame (make motion's noise) scatter consecutive re-observations out
+    of the narrow gate; exact ones, and poses 0.05 deg / 0.1 mm off, keep them in it. 60 segments in a
+    10 cm cube: about as sparse as the extractions of real frames (denser ones meet within 2 mm by
+    chance more often)."""
+    for seed in range(3):
+        noisy = MotionCheck()
+        for segments, T in _frames(1.0, frames=30, seed=seed, pose_noise=(1.5, 0.004), count=60):
+            noisy.add(segments, T)
+        assert noisy.near_share() < 0.09 and "the recorded poses seem to jitter" in noisy.jitter_warning(), seed
+    for noise in ((0.0, 0.0), (0.05, 0.0001)):
+        assert _check(1.0, frames=30, pose_noise=noise, count=60).jitter_warning() is None

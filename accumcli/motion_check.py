@@ -1,4 +1,7 @@
-"""Does stereo depth agree with the recorded motion? A check of the calibration's scale.
+"""Do the re-observations agree with the recorded motion? Checks of the calibration's scale and of
+the recorded poses' jitter (``MotionCheck``), from the segments of frame pairs moved by the motion.
+
+The scale.
 
 A baseline or focal length a little off scales every triangulated point about the camera by the
 same factor ``s``; the recorded poses do not change with it. A point seen at ``P`` in frame a
@@ -37,6 +40,15 @@ now they are named 1.20 and 1.15, the chessboard's 0.85 as 0.85, and a best scal
 range is named as a bound ("at least 1.40"). Errors of units (a factor of 10 or 1000) are others'
 to name: the baseline's range check and the empty model's message. No warning on the suite's 19
 recordings, ``make motion``'s 24 (exact and noisy) and the tracking scoreboard's 12.
+
+The jitter. Recorded poses a few mm off from frame to frame (a /tf from motor commands, or a
+jittery one) move re-observations apart by that much: of the segments of one frame found again in
+the next within ``JITTER_FAR_M`` (and ``MATCH_DEG``), few lie within ``MATCH_M``. The share that do
+(``near_share``) is 0.12 to 0.72 on recordings with exact or tracker-grade poses (the suite's rows,
+``make motion``'s exact ones, the teabox 0.46, the chessboard 0.54) and 0.00 to 0.06 on ``make
+motion``'s noisy ones (1.5 deg / 4 mm per frame); below ``MAX_NEAR_SHARE``, with at least
+``MIN_JITTER_MATCHES`` found within the wide gate, accumulate says so and proposes ``--motion
+tracked``.
 """
 
 from __future__ import annotations
@@ -61,14 +73,20 @@ MIN_PEAK_RATIO = 1.5
 MIN_PAIR_MATCHES = 3
 MAX_SIGN_P = 0.01
 WARN_SCALE = 0.01
+JITTER_FAR_M = 0.008
+MAX_NEAR_SHARE = 0.09
+MIN_JITTER_MATCHES = 50
 _AT_ONE = int(np.argmin(np.abs(SCALES - 1.0)))
 
 
 @dataclass
-class ScaleCheck:
-    """Match counts per scale over a run's first frames (``add``), and the run's warning (``report``)."""
+class MotionCheck:
+    """Match counts per scale, and consecutive frames' matches within the narrow and the wide gate, over
+    a run's first frames (``add``); the run's warnings (``scale_warning``, ``jitter_warning``)."""
 
     counts: np.ndarray = field(default_factory=lambda: np.zeros(len(SCALES)))
+    near: int = 0      # consecutive frames' matches within MATCH_M ...
+    far: int = 0       # ... and within JITTER_FAR_M, at the recorded motion (scale 1)
     frames: int = 0
     pair_scales: list = field(default_factory=list)   # best scale of each frame pair that tells on its own
     _recent: list = field(default_factory=list)   # (centres, directions, T_camera_object) of the last frames
@@ -88,22 +106,28 @@ class ScaleCheck:
             tree = cKDTree(centers)
             for gap in GAPS:
                 if len(self._recent) >= gap:
-                    self._count(tree, centers, directions, T_camera_object, *self._recent[-gap])
+                    self._count(tree, centers, directions, T_camera_object, *self._recent[-gap], gap == 1)
         self._recent = (self._recent + [(centers, directions, T_camera_object)])[-max(GAPS):]
 
-    def _count(self, tree, centers, directions, T_b, centers_a, directions_a, T_a) -> None:
-        """Matches of frame a's segments in frame b (``tree`` of b's centres) for every scale."""
+    def _count(self, tree, centers, directions, T_b, centers_a, directions_a, T_a, consecutive: bool) -> None:
+        """Matches of frame a's segments in frame b (``tree`` of b's centres) for every scale (and, for
+        ``consecutive`` frames, within both gates at scale 1)."""
         T_ba = T_b @ invert(T_a)          # the recorded motion from a's camera frame to b's
         R, t = T_ba[:3, :3], T_ba[:3, 3]
         moved = centers_a @ R.T
         turned = directions_a @ R.T
-        cos_limit = np.cos(np.radians(MATCH_DEG))
-        counts = np.zeros(len(SCALES))
-        for i, s in enumerate(SCALES):
-            dist, j = tree.query(moved + s * t, distance_upper_bound=MATCH_M)
+
+        def matches(points, gate):
+            dist, j = tree.query(points, distance_upper_bound=gate)
             found = np.isfinite(dist)
-            counts[i] = np.count_nonzero(np.abs(np.sum(turned[found] * directions[j[found]], axis=1)) >= cos_limit)
+            return np.count_nonzero(np.abs(np.sum(turned[found] * directions[j[found]], axis=1))
+                                    >= np.cos(np.radians(MATCH_DEG)))
+
+        counts = np.array([matches(moved + s * t, MATCH_M) for s in SCALES], float)
         self.counts += counts
+        if consecutive:
+            self.near += int(counts[_AT_ONE])
+            self.far += matches(moved + t, JITTER_FAR_M)
         best = int(np.argmax(counts))
         if counts[best] >= max(MIN_PAIR_MATCHES, MIN_PEAK_RATIO * counts[_AT_ONE]):
             self.pair_scales.append(float(SCALES[best]))
@@ -121,7 +145,7 @@ class ScaleCheck:
             return None
         return scale, ratio
 
-    def warning(self) -> str | None:
+    def scale_warning(self) -> str | None:
         found = self.estimate()
         if found is None or abs(found[0] - 1.0) < WARN_SCALE - 1e-9:
             return None
@@ -130,3 +154,16 @@ class ScaleCheck:
         return (f"stereo depths are {bound}{scale:.2f} times what the recorded motion implies (segments seen again "
                 f"match {ratio:.1f} times as often at that scale as at their own), so few are confirmed; check the "
                 f"baseline and focal length of the stereo calibration")
+
+    def near_share(self) -> float | None:
+        """Of consecutive frames' re-observations within the wide gate, the share within the narrow one
+        (None with fewer than ``MIN_JITTER_MATCHES``)."""
+        return self.near / self.far if self.far >= MIN_JITTER_MATCHES else None
+
+    def jitter_warning(self) -> str | None:
+        share = self.near_share()
+        if share is None or share >= MAX_NEAR_SHARE:
+            return None
+        return (f"the recorded poses seem to jitter: of the segments found again in the next frame within "
+                f"{JITTER_FAR_M * 1000:.0f} mm, only {share:.0%} lie within {MATCH_M * 1000:.0f} mm (with exact poses "
+                f"12 % or more), so few are confirmed; try --motion tracked, which repairs the poses on the images")
