@@ -14,6 +14,7 @@ from accumcli.model_io import read_truth
 from accumcli.recording import Recording, RecordingWriter, TransformTree
 from accumcli.recording.calibration import CameraCalibration, check_calibration
 from accumcli.recording.messages import decode_image, image_to_msg
+from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 
 from . import helpers
@@ -252,6 +253,9 @@ def test_sixteen_bit_images_are_scaled_by_the_bits_they_use(bits, full_scale):
     assert sixteen_bit_full_scale(msg) == full_scale
     assert np.abs(decode_image(msg, full_scale=full_scale).astype(int) - grey).max() <= 1
     assert sixteen_bit_full_scale(image_to_msg(grey, 0, "cam", "png")) is None
+    png = CompressedImage(format="png", data=cv2.imencode(".png", data.reshape(grey.shape))[1].tobytes())
+    assert sixteen_bit_full_scale(png) == full_scale   # a 16-bit PNG of the same data (an empty model before)
+    assert np.abs(decode_image(png, full_scale=full_scale).astype(int) - grey).max() <= 1
 
 
 def test_corrupt_frame_is_skipped_with_a_warning(tmp_path, caplog):

@@ -128,13 +128,21 @@ def image_encoding(msg) -> str:
 
 
 def sixteen_bit_full_scale(msg) -> int | None:
-    """The full scale of a raw 16-bit image's data (2^b - 1, b the even number of bits from 10 to 16
-    its largest value needs), or None for other images. Why: many industrial drivers publish 10- or
-    12-bit data as mono16; scaled by 255/65535 a 12-bit image keeps 16 grey levels and its edges are
-    lost (completeness 0.09 instead of 0.91 on the sample)."""
-    if getattr(msg, "encoding", None) not in ("mono16", "16UC1") or not msg.data:
+    """The full scale of a 16-bit image's data, raw (mono16) or a 16-bit PNG (2^b - 1, b the even
+    number of bits from 10 to 16 its largest value needs), or None for other images. Why: many
+    industrial drivers publish 10- or 12-bit data as 16 bits; scaled by 255/65535 a 12-bit image keeps
+    16 grey levels and its edges are lost (completeness 0.09 instead of 0.91 on the sample; a 16-bit
+    PNG of 12-bit data gave an empty model)."""
+    data = getattr(msg, "data", b"")
+    if getattr(msg, "encoding", None) in ("mono16", "16UC1") and data:
+        largest = int(np.frombuffer(data[:len(data) // 2 * 2], "<u2").max())
+    elif hasattr(msg, "format") and data[:8] == PNG_SIGNATURE and len(data) > 24 and data[24] == 16:
+        image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)   # the IHDR says 16 bits
+        if image is None or image.dtype != np.uint16:
+            return None
+        largest = int(image.max())
+    else:
         return None
-    largest = int(np.frombuffer(msg.data[:len(msg.data) // 2 * 2], "<u2").max())
     bits = min(16, max(10, largest.bit_length() + largest.bit_length() % 2))
     return (1 << bits) - 1
 
