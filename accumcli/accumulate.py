@@ -341,31 +341,36 @@ class Accumulator(Generic[E]):
         static[candidates] = best + rule.static_margin < held[candidates]
         return static
 
-    def _consolidate(self, i: np.ndarray, j: np.ndarray) -> int:
+    def _consolidate(self, i: np.ndarray, j: np.ndarray, rounds: int = 3) -> int:
         """Merge model entities (candidate pairs i, j) that the entity type deems the same:
         the more confident one absorbs the other, keeping the larger confidence
         and the sum of observations. Without this, a duplicate would take the
         observations of the entity it doubles (merging is one-to-one) and both
         would be punished in turn. Candidates are the entities that corresponded
         to one observation: only those can have become duplicates (a new entity
-        corresponded to nothing)."""
-        if len(i) == 0:
-            return 0
-        same, cost = self.entity_type.same(self.entities, i, j)
-        i, j, cost = i[same], j[same], cost[same]
-        if len(i) == 0:
-            return 0
-        # each entity in one merge at most (a chain a <- b <- c waits for the next frame): as one_to_one,
-        # whose two sides were apart, an entity won one merge and lost another, or absorbed two losers
-        # of which numpy's repeated-index += kept one's sums (observations and information lost)
-        keep = disjoint_pairs(i, j, cost)
-        i, j = i[keep], j[keep]
-        stronger = self.log_odds[i] >= self.log_odds[j]
-        winner, loser = np.where(stronger, i, j), np.where(stronger, j, i)
-        self.entities = self.entity_type.merge(self.entities, self.entities, winner, loser, None)
-        self.log_odds[winner] = np.maximum(self.log_odds[winner], self.log_odds[loser])
-        self.observations[winner] += self.observations[loser]
-        self.views[winner] = np.maximum(self.views[winner], self.views[loser])
-        self.last_confirmed[winner] = np.maximum(self.last_confirmed[winner], self.last_confirmed[loser])
-        self.log_odds[loser] = -np.inf  # removed with the pruned ones, in one copy
-        return len(loser)
+        corresponded to nothing). Each round merges pairs of which no two share an entity
+        (``disjoint_pairs``: one_to_one, whose two sides were apart, let an entity win one merge
+        and lose another, or absorb two losers of which numpy's repeated-index += kept one's
+        observations and information); up to ``rounds`` rounds take the rest of a group of three or
+        more (merging them in one frame, as before, keeps ``make motion``'s figures)."""
+        merged = 0
+        for _ in range(rounds):
+            alive = np.isfinite(self.log_odds[i]) & np.isfinite(self.log_odds[j])
+            i, j = i[alive], j[alive]
+            if len(i) == 0:
+                break
+            same, cost = self.entity_type.same(self.entities, i, j)
+            i, j, cost = i[same], j[same], cost[same]
+            if len(i) == 0:
+                break
+            keep = disjoint_pairs(i, j, cost)
+            stronger = self.log_odds[i[keep]] >= self.log_odds[j[keep]]
+            winner, loser = np.where(stronger, i[keep], j[keep]), np.where(stronger, j[keep], i[keep])
+            self.entities = self.entity_type.merge(self.entities, self.entities, winner, loser, None)
+            self.log_odds[winner] = np.maximum(self.log_odds[winner], self.log_odds[loser])
+            self.observations[winner] += self.observations[loser]
+            self.views[winner] = np.maximum(self.views[winner], self.views[loser])
+            self.last_confirmed[winner] = np.maximum(self.last_confirmed[winner], self.last_confirmed[loser])
+            self.log_odds[loser] = -np.inf  # removed with the pruned ones, in one copy
+            merged += len(loser)
+        return merged

@@ -389,9 +389,9 @@ def test_views_within_the_aspect_span_count_as_one_aspect():
 
 
 def test_duplicates_merge_in_disjoint_pairs_and_keep_every_observation():
-    """Three copies of one segment (pairs 0-1, 1-2, 0-2 all the same): an entity takes part in one merge
-    per frame at most, and what survives holds every observation and every view's information (with
-    one_to_one, whose two sides were apart, a winner absorbed two losers and kept one's sums)."""
+    """Three copies of one segment (pairs 0-1, 1-2, 0-2 all the same): merged in rounds of disjoint
+    pairs, one survives with every observation and every view's information (with one_to_one, whose
+    two sides were apart, a winner absorbed two losers and kept one's sums)."""
     kind = LineSegmentType()
     context = FrameContext(make_transform(np.eye(3), [0, 0, 0.5]), INTR)
     copies = Segments("object", np.array([[0, 0, 0], [0.0005, 0, 0], [0.001, 0, 0.0]]), np.tile([0, 1.0, 0], (3, 1)),
@@ -404,7 +404,7 @@ def test_duplicates_merge_in_disjoint_pairs_and_keep_every_observation():
         i, j = _sharing(np.array([0, 1, 2]), np.array([0, 0, 0]))
         merged = core._consolidate(i, j)
         live = np.isfinite(core.log_odds)
-        assert merged == 1 and live.sum() == 2
+        assert merged == 2 and live.sum() == 1
         assert core.observations[live].sum() == 15 and core.entities.extra["weight"][live].sum() == 3
 
 
