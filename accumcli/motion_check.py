@@ -111,23 +111,31 @@ class MotionCheck:
 
     def _count(self, tree, centers, directions, T_b, centers_a, directions_a, T_a, consecutive: bool) -> None:
         """Matches of frame a's segments in frame b (``tree`` of b's centres) for every scale (and, for
-        ``consecutive`` frames, within both gates at scale 1)."""
+        ``consecutive`` frames, within both gates at scale 1): a segment of a matches at scale s where
+        a segment of b of its direction lies within ``MATCH_M`` of R P + s t. One ball query finds the
+        candidates along the whole range of s and their distances are solved for every s at once
+        (a query per scale took 11 ms a frame, a fifth of the accumulation's time)."""
         T_ba = T_b @ invert(T_a)          # the recorded motion from a's camera frame to b's
         R, t = T_ba[:3, :3], T_ba[:3, 3]
         moved = centers_a @ R.T
         turned = directions_a @ R.T
-
-        def matches(points, gate):
-            dist, j = tree.query(points, distance_upper_bound=gate)
-            found = np.isfinite(dist)
-            return np.count_nonzero(np.abs(np.sum(turned[found] * directions[j[found]], axis=1))
-                                    >= np.cos(np.radians(MATCH_DEG)))
-
-        counts = np.array([matches(moved + s * t, MATCH_M) for s in SCALES], float)
+        middle, half = (SCALES[-1] + SCALES[0]) / 2, (SCALES[-1] - SCALES[0]) / 2
+        found = tree.query_ball_point(moved + middle * t, half * np.linalg.norm(t) + max(MATCH_M, JITTER_FAR_M))
+        i = np.repeat(np.arange(len(moved)), [len(f) for f in found])
+        j = np.fromiter((k for f in found for k in f), np.int64, len(i))
+        aligned = np.abs(np.sum(turned[i] * directions[j], axis=1)) >= np.cos(np.radians(MATCH_DEG))
+        i, j = i[aligned], j[aligned]
+        rel = centers[j] - moved[i]                                       # (P, 3): Q - R P, metres
+        squared = (np.sum(rel * rel, axis=1)[:, None] - 2 * SCALES[None, :] * (rel @ t)[:, None]
+                   + SCALES[None, :] ** 2 * float(t @ t))                 # (P, S): |Q - R P - s t|^2
+        matched = np.zeros((len(moved), len(SCALES)), bool)
+        rows, scales = np.nonzero(squared < MATCH_M ** 2)
+        matched[i[rows], scales] = True
+        counts = matched.sum(axis=0).astype(float)
         self.counts += counts
         if consecutive:
             self.near += int(counts[_AT_ONE])
-            self.far += matches(moved + t, JITTER_FAR_M)
+            self.far += len(np.unique(i[squared[:, _AT_ONE] < JITTER_FAR_M ** 2]))
         best = int(np.argmax(counts))
         if counts[best] >= max(MIN_PAIR_MATCHES, MIN_PEAK_RATIO * counts[_AT_ONE]):
             self.pair_scales.append(float(SCALES[best]))
