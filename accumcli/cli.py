@@ -31,7 +31,8 @@ from .cli_options import (
     workers_option,
 )
 from .errors import AccumError
-from .outputs import caused_by_interrupt, descriptor_of, names_open_file, raise_pending_interrupt
+from .outputs import (caused_by_interrupt, descriptor_of, interrupt_received, names_open_file,
+                      raise_pending_interrupt)
 
 log = logging.getLogger("accumcli")
 
@@ -70,9 +71,14 @@ class AccumGroup(click.Group):
         except AccumError as e:
             click.echo(f"error: {e}", err=True)
             code = 1
-        except (KeyboardInterrupt, _Interrupted, click.Abort, SystemError) as e:
-            if isinstance(e, SystemError) and not caused_by_interrupt(e):
-                raise          # a SystemError is an interrupt only when compiled code wrapped one; else a bug
+        except (KeyboardInterrupt, _Interrupted, click.Abort):
+            click.echo("error: interrupted", err=True)
+            code = 130
+        except Exception as e:
+            # an interrupt that C code handed on as another error (a SystemError of compiled code, a
+            # TypeError of numpy's); any other error is a bug and keeps its traceback
+            if not (interrupt_received() or caused_by_interrupt(e)):
+                raise
             click.echo("error: interrupted", err=True)
             code = 130
         sys.exit(code if isinstance(code, int) else 0)
