@@ -184,13 +184,13 @@ def _titled(image: np.ndarray, title: str, bar: int = 22) -> np.ndarray:
 
 
 def render_frame_panel(frame, result, model, T_camera_object: np.ndarray, truth_ends: np.ndarray | None = None,
-                       more: dict | None = None) -> np.ndarray:
+                       more: dict | None = None, name: str = "model") -> np.ndarray:
     """Three panels side by side (the paper's Figure 5), each (H + 22, W) with a title:
     the left input image; the frame's 3D segments (``result.segments``, left camera
     frame) projected into the left camera, black on white; the model (object frame)
     projected into the same camera at ``T_camera_object``, grey by confidence, over a
     truth's edges (``truth_ends``, (M, 2, 3) metres, object frame) in magenta if given;
-    then one more such panel per model of ``more`` (name -> ``Segments``).
+    then one more such panel per model of ``more`` (name -> ``Segments``); ``name``: the first model's title.
     Returns (H + 22, (3 + len(more)) W + 4 (2 + len(more)), 3) uint8."""
     K = frame.intrinsics.K
     h, w = frame.left.shape
@@ -199,12 +199,12 @@ def render_frame_panel(frame, result, model, T_camera_object: np.ndarray, truth_
     extracted = np.full((h, w, 3), 255, np.uint8)
     draw_segments(extracted, result.segments.endpoints(), K, np.zeros(len(result.segments)), thickness)
     panels = [_titled(image, f"frame {frame.index}"), _titled(extracted, f"{len(result.segments)} 3D segments")]
-    for name, shown in {"model": model, **(more or {})}.items():
+    for title, shown in {name: model, **(more or {})}.items():
         projected = np.full((h, w, 3), 255, np.uint8)
         _draw_truth(projected, truth_ends, T_camera_object, K)
         ends = transform_points(T_camera_object, shown.endpoints().reshape(-1, 3)).reshape(-1, 2, 3)
         draw_segments(projected, ends, K, confidence_grey(shown.confidence), thickness)
-        panels.append(_titled(projected, f"{name}: {int(shown.accepted.sum())}/{len(shown)} accepted"))
+        panels.append(_titled(projected, f"{title}: {int(shown.accepted.sum())}/{len(shown)} accepted"))
     return _side_by_side(panels)
 
 

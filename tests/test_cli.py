@@ -303,6 +303,7 @@ def helpers_empty(tmp_path):
     (["--frames", "5:2"], "expected START < STOP"),
     (["--box", "0:1,0:1"], "expected X0:X1,Y0:Y1,Z0:Z1 (metres, object frame), found '0:1,0:1'"),
     (["--box", "0:1,0:1,1:0"], "with each minimum below its maximum"),
+    (["--box=-60:60,-200:50,-50:50"], "a box 250 m across, found '-60:60,-200:50,-50:50' (millimetres? give metres)"),
     (["--frames", "50:60"], "frames 50:60 select no frame: the recording has 6 stereo frames (0:6)"),
 ])
 def test_accumulate_validates_options(small_recording, tmp_path, monkeypatch, args, message):
@@ -704,7 +705,7 @@ def test_library_runs_take_one_path_or_a_list_and_refuse_other_types(small_recor
             call()
 
 
-def test_track_takes_the_models_object_frame_and_refuses_another(small_recording, tmp_path):
+def test_track_takes_the_models_object_frame_unless_one_is_given(small_recording, tmp_path):
     import json
 
     model = tmp_path / "m.json"
@@ -712,8 +713,10 @@ def test_track_takes_the_models_object_frame_and_refuses_another(small_recording
     doc = json.loads(model.read_text())
     doc["frame_id"] = "board"
     model.write_text(json.dumps(doc))
+    # --object-frame wins: the same object under another name is tracked, with a warning
     result = run("track", model, small_recording, "-o", tmp_path / "p.json", "--object-frame", "gripper")
-    assert result.exit_code == 1 and "the model is in frame 'board', the recording's object frame is 'gripper'" in result.output
+    assert result.exit_code == 0 and "the model is in frame 'board', tracked as the recording's 'gripper'" in result.output
+    assert "tracked" in result.output.splitlines()[-3]
     # without --object-frame the model's frame is the object's: this recording has none of that name
     result = run("track", model, small_recording, "-o", tmp_path / "p.json")
     assert result.exit_code == 1 and "no transform path from 'camera_left' to 'board'" in result.output

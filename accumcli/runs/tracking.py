@@ -83,7 +83,7 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
     if not model.accepted.any():
         raise AccumError(f"{model_path}: the model has no accepted segment (confidence >= 0.5) to track")
     if object_frame_of_model and model.frame_id and model.frame_id != options.object_frame:
-        log.info("the object's frame is the model's: %s", model.frame_id)
+        log.info("the object's frame is the model's: %s (--object-frame tracks it in another)", model.frame_id)
         options = replace(options, object_frame=model.frame_id)
     if init_pose is not None:
         init_pose = check_transform(init_pose, "init_pose")
@@ -93,10 +93,10 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
     t0 = time.perf_counter()
     with options.open(recording, require_pose=init_pose is None) as rec, files:
         total = frames.check(rec)
-        if model.frame_id and model.frame_id != rec.object_frame:   # a model of another object (frame)
-            raise AccumError(f"{model_path}: the model is in frame {model.frame_id!r}, the recording's object "
-                             f"frame is {rec.object_frame!r}: give --object-frame {model.frame_id} if it is the "
-                             "same object, or the model of this one")
+        if model.frame_id and model.frame_id != rec.object_frame:   # --object-frame given: the user's choice
+            log.warning("%s: the model is in frame %r, tracked as the recording's %r (--object-frame): the same "
+                        "object under another name, or a wrong model (then nothing is tracked)", model_path,
+                        model.frame_id, rec.object_frame)
         with rerun_log(files, rrd, "track") as viz:
             for frame in rec.frames(frames.start, frames.stop):
                 guess = None

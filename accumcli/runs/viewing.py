@@ -189,6 +189,9 @@ def _draw_picture(inputs: ViewInputs, png, png_frame, options) -> None:
         raise InputError("a picture (--png) needs a model among the inputs")
     # every model, over the truth's edges (the truth alone is drawn as a model)
     named = inputs.models or {"truth": inputs.truth}
+    frames = {m.frame_id for m in named.values() if m.frame_id}
+    if len(frames) > 1:
+        log.warning("the models are in different object frames (%s): drawn as one object", ", ".join(sorted(frames)))
     truth_ends = inputs.truth.endpoints() if inputs.models and inputs.truth is not None else None
     if not inputs.recording:
         write_png(png, render_model(*named.values(), truth_ends=truth_ends) if len(named) == 1
@@ -202,7 +205,7 @@ def _draw_picture(inputs: ViewInputs, png, png_frame, options) -> None:
             if T is None:
                 why = "" if source == "recorded" else f" ({source})"
                 raise AccumError(f"{inputs.recording}: frame {wanted} has no pose to place the model{why}")
-            first, *others = named.items()
-            write_png(png, render_frame_panel(frame, extract_frame(frame), first[1], T, truth_ends, dict(others)))
+            (name, first), *others = named.items()
+            write_png(png, render_frame_panel(frame, extract_frame(frame), first, T, truth_ends, dict(others), name))
             return
         raise AccumError(f"{inputs.recording}: no frame {wanted} (the recording has {rec.frame_count_hint})")
