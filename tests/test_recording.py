@@ -364,3 +364,29 @@ def test_rectification_wedges_give_no_segments(raw_recording):
 def test_rectified_input_has_no_wedges(small_recording):
     with Recording(small_recording) as rec:
         assert next(rec.frames()).border_distance is None
+
+
+def test_a_first_frame_darker_than_the_rest_does_not_saturate_them(small_recording, tmp_path, caplog):
+    """16-bit PNGs of 12-bit data whose first frame is dim (its largest value needs 10 bits): the scale
+    chosen from it saturated every later frame (dev_tprofile so made: completeness 0.345 against
+    0.484); it now grows to the bits a later frame needs, with a warning."""
+    from accumcli.recording.messages import image_to_msg
+
+    path = tmp_path / "dim_first.mcap"
+    with Recording(small_recording) as rec, RecordingWriter(path) as w:
+        for side in ("left", "right"):
+            w.calibration(f"/stereo/{side}/calibration", rec.calibrations[side][0][1], rec.calibrations[side][0][0])
+        originals = []
+        for frame in rec.frames(0, 3):
+            w.transform("camera_left", "gripper", frame.T_camera_object, frame.timestamp_ns)
+            gain = 4 if frame.index == 0 else 16            # 10 bits in the first frame, 12 after
+            for side, image in (("left", frame.left), ("right", frame.right)):
+                msg = image_to_msg(image, frame.timestamp_ns, f"camera_{side}", "png")
+                msg.data = cv2.imencode(".png", image.astype(np.uint16) * gain)[1].tobytes()
+                w._put(f"/stereo/{side}/image", msg, frame.timestamp_ns)
+            originals.append(frame.left)
+    with caplog.at_level(logging.WARNING), Recording(path) as rec:
+        decoded = [frame.left for frame in rec.frames()]
+    assert "from it on, the 16-bit images use 12 bits" in caplog.text
+    for frame, original in enumerate(originals):
+        assert np.abs(decoded[frame].astype(int) - original).mean() < 1.5, frame

@@ -595,8 +595,15 @@ class Recording:
                         self._full_scale = sixteen_bit_full_scale(left_msg) or 65535
                         if self._full_scale < 65535:
                             log.warning("%s: the 16-bit images use %d bits (the first frame's largest value "
-                                        "needs them): scaled by 255/%d, brighter values saturate", self.path,
+                                        "needs them): scaled by 255/%d", self.path,
                                         self._full_scale.bit_length(), self._full_scale)
+                    elif self._full_scale < 65535:   # a brighter frame needs more bits: the scale grows
+                        needed = max(sixteen_bit_full_scale(m) or 0 for m in (left_msg, right_msg))
+                        if needed > self._full_scale:
+                            self._full_scale = needed
+                            log.warning("%s: from it on, the 16-bit images use %d bits: scaled by 255/%d (a "
+                                        "first frame darker than the rest gave too few)", where,
+                                        needed.bit_length(), needed)
                     left, right = (decode_image(m, size, self._full_scale) for m in (left_msg, right_msg))
                 except DecodeError as e:
                     warn("undecodable frame", "%s: %s: skipped", where, e)
