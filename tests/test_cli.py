@@ -151,6 +151,20 @@ def test_an_output_on_stdout_gets_the_output_and_the_report_goes_to_stderr(small
     assert "wrote /dev/stdout" in done.stderr
 
 
+def test_every_output_named_dash_is_the_standard_output(small_recording, tmp_path):
+    """--png - (as -o -): the picture on stdout, no file named '-' (view, accumulate's --png/--history/
+    --plot/--panel/--rrd, track's and extract's --rrd, eval's --plot all wrote one)."""
+    import subprocess
+    import sys
+
+    model = tmp_path / "m.json"
+    assert run("accumulate", small_recording, "-o", model, "--frames", "0:2").exit_code == 0
+    done = subprocess.run([sys.executable, "-m", "accumcli.cli", "view", str(model), "--png", "-"], capture_output=True,
+                          cwd=tmp_path)
+    assert done.returncode == 0 and done.stdout.startswith(b"\x89PNG") and not (tmp_path / "-").exists()
+    assert b"wrote /dev/stdout" in done.stderr
+
+
 def test_simulate_rejects_bad_options(tmp_path):
     result = run("simulate", "-o", tmp_path / "x.mcap", "--pose-noise", "abc")
     assert result.exit_code == 1 and "expected DEG,MM" in result.output
