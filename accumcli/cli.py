@@ -201,6 +201,9 @@ def _dash_is_stdout(ctx, param, value):
     return "/dev/stdout" if value == "-" else value
 
 
+_OUTPUT_PATH = dict(type=click.Path(dir_okay=False, allow_dash=True), callback=_dash_is_stdout)   # a file, or -
+
+
 def _check_formats(outputs, suffixes: tuple) -> None:
     """Each output names its format by one of ``suffixes``; the standard output cannot."""
     for path in outputs:
@@ -211,8 +214,7 @@ def _check_formats(outputs, suffixes: tuple) -> None:
                                      f"{path!r}{why}", param_hint="--output")
 
 
-output_option = functools.partial(click.option, "-o", "--output", type=click.Path(dir_okay=False, allow_dash=True),
-                                  callback=_dash_is_stdout)
+output_option = functools.partial(click.option, "-o", "--output", **_OUTPUT_PATH)
 
 
 # -- info -----------------------------------------------------------------------------------------
@@ -311,7 +313,7 @@ def simulate(output, count, size, scene, shape, seed, size_mm, distance, contras
 @command()
 @recording_arg()
 @output_option(required=True, help="Frames file to write (JSON lines, one stereo frame per line).")
-@click.option("--rrd", type=click.Path(dir_okay=False, allow_dash=True), callback=_dash_is_stdout,
+@click.option("--rrd", **_OUTPUT_PATH,
               help="Also save a Rerun recording of each frame's images, 2D and 3D segments.")
 @click.option("--with-2d", is_flag=True, help="Also write each frame's left 2D segments (for the funnel of eval).")
 @frame_workers_option
@@ -346,16 +348,16 @@ def extract(recording, output, rrd, with_2d, workers, frames, extract_params, op
                help="Model to write: .json (the model), .ply (line set) and/or .mcap (Foxglove SceneUpdate over "
                     "time); repeatable.")
 @click.option("--all", "ply_all", is_flag=True, help="The PLY holds every segment, not only the accepted ones.")
-@click.option("--rrd", type=click.Path(dir_okay=False, allow_dash=True), callback=_dash_is_stdout,
+@click.option("--rrd", **_OUTPUT_PATH,
               help="Also save a Rerun recording: images, segments, the model by confidence, counts over time.")
 @click.option("--truth", type=click.Path(dir_okay=False, exists=True),
               help="A truth sidecar: also measure precision, completeness and background frame by frame.")
-@click.option("--history", type=click.Path(dir_okay=False, allow_dash=True), callback=_dash_is_stdout,
+@click.option("--history", **_OUTPUT_PATH,
               help="Write the per-frame counts (and figures with --truth) as JSON lines.")
-@click.option("--plot", type=click.Path(dir_okay=False, allow_dash=True), callback=_dash_is_stdout, help="Draw the per-frame counts (and figures) as a PNG.")
-@click.option("--png", type=click.Path(dir_okay=False, allow_dash=True), callback=_dash_is_stdout,
+@click.option("--plot", **_OUTPUT_PATH, help="Draw the per-frame counts (and figures) as a PNG.")
+@click.option("--png", **_OUTPUT_PATH,
               help="Write a picture of the model (confidence as grey level, dark = high).")
-@click.option("--panel", type=click.Path(dir_okay=False, allow_dash=True), callback=_dash_is_stdout,
+@click.option("--panel", **_OUTPUT_PATH,
               help="Write the last frame's input image, extraction and the model side by side.")
 @click.option("--motion", type=click.Choice(["gripper", "tracked"]), default="gripper", show_default=True,
               help="gripper: the recorded poses (the paper); tracked: the recorded poses repaired first, in "
@@ -413,7 +415,7 @@ def accumulate(recording, outputs, ply_all, rrd, truth, history, plot, png, pane
 @click.option("--init", "init_pose", default="recording", show_default=True, callback=library_value(parse_pose),
               metavar="recording|x,y,z,qx,qy,qz,qw",
               help="Pose of the first frame: the recording's, or given (metres, quaternion).")
-@click.option("--rrd", type=click.Path(dir_okay=False, allow_dash=True), callback=_dash_is_stdout,
+@click.option("--rrd", **_OUTPUT_PATH,
               help="Also save a Rerun recording: the model over the images at the estimated pose, the trajectory.")
 @click.option("--reacquire/--no-reacquire", default=True, show_default=True,
               help="After a loss, search by RANSAC over the frame's extracted 3D segments.")
@@ -451,10 +453,10 @@ def track(model_file, recording, outputs, init_pose, rrd, reacquire, poses_topic
 # -- view ------------------------------------------------------------------------------------------
 @command()
 @click.argument("inputs", nargs=-1, required=True, type=click.Path(exists=True))
-@click.option("--rrd", type=click.Path(dir_okay=False, allow_dash=True), callback=_dash_is_stdout, help="Save a Rerun recording.")
+@click.option("--rrd", **_OUTPUT_PATH, help="Save a Rerun recording.")
 @click.option("--spawn", is_flag=True, help="Open the Rerun viewer (where one can run).")
 @click.option("--connect", metavar="URL", help="Send to a running viewer, e.g. rerun+http://127.0.0.1:9876/proxy.")
-@click.option("--png", type=click.Path(dir_okay=False, allow_dash=True), callback=_dash_is_stdout,
+@click.option("--png", **_OUTPUT_PATH,
               help="Write a picture: every model side by side, over a truth's edges in magenta (with a "
                    "recording: one frame, its extraction and each model in that camera).")
 @click.option("--png-frame", type=click.IntRange(min=0), help="Frame of the recording for --png (default: middle).")
@@ -537,7 +539,7 @@ def batch(recordings, outdir, track, truth_from_sidecar, box, workers, ray_addre
               help="Segments farther than this from every truth edge are background, millimetres.")
 @click.option("--min-seen", type=click.IntRange(1, 1000), default=3, show_default=True,
               help="Completeness counts edge samples seen in at least this many frames.")
-@click.option("--plot", type=click.Path(dir_okay=False, allow_dash=True), callback=_dash_is_stdout,
+@click.option("--plot", **_OUTPUT_PATH,
               help="With a frames file: its figures frame by frame as a PNG.")
 @click.option("--support-face", type=click.IntRange(min=0), metavar="N",
               help="With a truth that has faces: segments on face N's plane near the object (the board it stands "

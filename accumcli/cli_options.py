@@ -165,9 +165,9 @@ def parse_box(text: str) -> tuple:
         raise InputError(f"expected {form}, found {text!r}")
     if not all(math.isfinite(lo) and math.isfinite(hi) and lo < hi for lo, hi in box):
         raise InputError(f"expected {form} with each minimum below its maximum, found {text!r}")
-    if max(hi - lo for lo, hi in box) > 10.0:   # an object held by a gripper: millimetres, most likely
-        raise InputError(f"expected {form}: a box {max(hi - lo for lo, hi in box):g} m across, found {text!r} "
-                         "(millimetres? give metres)")
+    across = max(hi - lo for lo, hi in box)
+    if across > 10.0:   # around an object a gripper holds: millimetres, most likely
+        raise InputError(f"expected {form}: a box {across:g} m across, found {text!r} (millimetres? give metres)")
     return box
 
 
