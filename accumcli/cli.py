@@ -208,10 +208,12 @@ def _check_formats(outputs, suffixes: tuple) -> None:
     """Each output names its format by one of ``suffixes``; the standard output cannot."""
     for path in outputs:
         if not path.lower().endswith(suffixes):
-            why = " (the standard output has no name to tell the format by: write a file)" \
-                if descriptor_of(path) is not None else ""
+            if descriptor_of(path) is not None:   # '-' became /dev/stdout: name what the user may have typed
+                raise click.BadParameter(f"expected a {', '.join(suffixes[:-1])} or {suffixes[-1]} file, found the "
+                                         f"standard output ({'- or /dev/stdout' if path == '/dev/stdout' else path}), which has no "
+                                         "name to tell the format by: write a file", param_hint="--output")
             raise click.BadParameter(f"expected a {', '.join(suffixes[:-1])} or {suffixes[-1]} file, found "
-                                     f"{path!r}{why}", param_hint="--output")
+                                     f"{path!r}", param_hint="--output")
 
 
 output_option = functools.partial(click.option, "-o", "--output", **_OUTPUT_PATH)
