@@ -202,9 +202,12 @@ def one_to_one(a: np.ndarray, b: np.ndarray, cost: np.ndarray, rounds: int = 4) 
 
 def disjoint_pairs(a: np.ndarray, b: np.ndarray, cost: np.ndarray, rounds: int = 4) -> np.ndarray:
     """Indices of pairs (a[k], b[k]) of one set of entities of which no two share an entity, on either
-    side, by ascending cost: ``one_to_one`` with a and b one index space."""
+    side, by ascending cost: ``one_to_one`` with a and b one index space. (x, y) and (y, x) are one
+    pair (the first of them is kept): as two, at equal cost, each was the other's rival and neither
+    was ever chosen."""
+    _, first = np.unique(np.column_stack([np.minimum(a, b), np.maximum(a, b)]), axis=0, return_index=True)
     chosen = []
-    alive = np.arange(len(a))
+    alive = np.sort(first)
     used = np.zeros(int(max(a.max(initial=-1), b.max(initial=-1))) + 1, bool)
     for _ in range(rounds):
         if len(alive) == 0:

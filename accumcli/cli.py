@@ -205,15 +205,16 @@ _OUTPUT_PATH = dict(type=click.Path(dir_okay=False, allow_dash=True), callback=_
 
 
 def _check_formats(outputs, suffixes: tuple) -> None:
-    """Each output names its format by one of ``suffixes``; the standard output cannot."""
+    """Each output names its format by one of ``suffixes``; a stream (stdout, ``-``) cannot."""
+    expected = (f"expected a {', '.join(suffixes[:-1])} or {suffixes[-1]} file" if len(suffixes) > 1
+                else f"expected a name ending in {suffixes[0]}")
     for path in outputs:
         if not path.lower().endswith(suffixes):
-            if descriptor_of(path) is not None:   # '-' became /dev/stdout: name what the user may have typed
-                raise click.BadParameter(f"expected a {', '.join(suffixes[:-1])} or {suffixes[-1]} file, found the "
-                                         f"standard output ({'- or /dev/stdout' if path == '/dev/stdout' else path}), which has no "
-                                         "name to tell the format by: write a file", param_hint="--output")
-            raise click.BadParameter(f"expected a {', '.join(suffixes[:-1])} or {suffixes[-1]} file, found "
-                                     f"{path!r}", param_hint="--output")
+            # '-' became /dev/stdout: name what the user may have typed
+            found = ("the standard output (- or /dev/stdout)" if path == "/dev/stdout" else
+                     f"the stream {path}" if descriptor_of(path) is not None else repr(path))
+            why = ", which has no name to tell the format by: write a file" if descriptor_of(path) is not None else ""
+            raise click.BadParameter(f"{expected}, found {found}{why}", param_hint="--output")
 
 
 output_option = functools.partial(click.option, "-o", "--output", **_OUTPUT_PATH)
@@ -292,8 +293,7 @@ def simulate(output, count, size, scene, shape, seed, size_mm, distance, contras
     width, height = int(size[0]), int(size[1])
     if width < 64 or height < 48 or width > 8192 or height > 8192:
         raise click.BadParameter(f"expected 64x48 to 8192x8192, found {width}x{height}", param_hint="--size")
-    if not output.endswith(".mcap"):
-        raise click.BadParameter(f"expected a name ending in .mcap, found {output!r}", param_hint="--output")
+    _check_formats([output], (".mcap",))
     if distortion != "plumb_bob" and not raw:
         raise click.BadParameter("applies to raw images only; add --raw", param_hint="--distortion")
     options = SimulationOptions(frames=count, width=width, height=height, shape=shape, seed=seed, raw=raw,
@@ -489,7 +489,7 @@ def view(inputs, rrd, spawn, connect, png, png_frame, frames, options):
 # -- batch -----------------------------------------------------------------------------------------
 @command()
 @click.argument("recordings", nargs=-1, required=True, type=click.Path())
-@output_option("outdir", required=True, type=click.Path(file_okay=False), help="Folder of the results.")
+@output_option("outdir", required=True, type=click.Path(file_okay=False), callback=None, help="Folder of the results.")
 @click.option("--track", is_flag=True, help="Also track each model through its recording (poses.json).")
 @click.option("--truth-from-sidecar", is_flag=True, help="Evaluate each model against NAME.truth.json beside it.")
 @box_option

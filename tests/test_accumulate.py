@@ -413,3 +413,5 @@ def test_disjoint_pairs_share_no_entity_on_either_side():
     chosen = disjoint_pairs(a, b, cost)
     ends = np.concatenate([a[chosen], b[chosen]])
     assert sorted(chosen) == [1, 3] and len(set(ends)) == len(ends)
+    # one pair listed in both orders at one cost (as _sharing lists them): chosen once, not never
+    assert list(disjoint_pairs(np.array([0, 1]), np.array([1, 0]), np.array([0.1, 0.1]))) == [0]

@@ -92,3 +92,11 @@ def test_a_rerun_with_other_options_leaves_no_output_of_the_earlier_one(recordin
     assert {"poses.json", "eval.json"} <= {p.name for p in (tmp_path / "a").iterdir()}
     run_batch(recordings[:1], tmp_path, BatchOptions(frames=FrameRange(0, 4)), workers=1)
     assert {p.name for p in (tmp_path / "a").iterdir()} == {"model.json", "model.ply", "done.json"}
+
+
+def test_a_batch_folder_named_dash_is_a_folder(recordings, tmp_path, monkeypatch):
+    """-o - is stdout for a file output, but batch writes a folder: '-' stays its name."""
+    monkeypatch.chdir(tmp_path)
+    result = CliRunner().invoke(main, ["batch", *recordings[:1], "-o", "-", "--frames", "0:2", "--workers", "1"])
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "-" / "summary.csv").exists()

@@ -313,6 +313,7 @@ def helpers_empty(tmp_path):
     (["-o", "nowhere/m.json"], "the folder nowhere does not exist"),
     (["-o", "m.txt"], "expected a .json, .ply or .mcap"),
     (["-o", "-"], "found the standard output (- or /dev/stdout), which has no name to tell the format by: write a file"),
+    (["-o", "/dev/stderr"], "found the stream /dev/stderr, which has no name to tell the format by"),
     (["--frames", "10"], "expected START:STOP, found '10' (frame 10 alone is 10:11, the first 10 frames are 0:10)"),
     (["--frames", "5:2"], "expected START < STOP"),
     (["--box", "0:1,0:1"], "expected X0:X1,Y0:Y1,Z0:Z1 (metres, object frame), found '0:1,0:1'"),

@@ -576,6 +576,7 @@ class Recording:
         before it is skipped with a warning: both would be placed by the one pose of that time (a
         driver that repeats a stamp put a frame at its neighbour's pose, silently)."""
         previous_ns = None
+        self._full_scale = None   # each pass decodes a frame as the first pass did (the scale grows within one)
         with LimitedWarnings(log, prefix=f"{self.path}: ") as warn:
             for index, t_ns, left_msg, right_msg in self._pairs(warn):
                 repeated, previous_ns = t_ns == previous_ns, t_ns
@@ -592,7 +593,7 @@ class Recording:
                 size = (rectifier.intrinsics.width, rectifier.intrinsics.height)
                 try:
                     if self._full_scale is None:   # of 16-bit data: its bit depth, from the first frame
-                        self._full_scale = sixteen_bit_full_scale(left_msg) or 65535
+                        self._full_scale = max(sixteen_bit_full_scale(m) or 0 for m in (left_msg, right_msg)) or 65535
                         if self._full_scale < 65535:
                             log.warning("%s: the 16-bit images use %d bits (the first frame's largest value "
                                         "needs them): scaled by 255/%d", self.path,
