@@ -180,24 +180,7 @@ def one_to_one(a: np.ndarray, b: np.ndarray, cost: np.ndarray, rounds: int = 4) 
     b, then drops every pair touching a kept a or b; a few rounds recover
     nearly all of the greedy matching without a Python loop over pairs.
     """
-    chosen = []
-    alive = np.arange(len(a))
-    used_a = np.zeros(int(a.max(initial=-1)) + 1, bool)
-    used_b = np.zeros(int(b.max(initial=-1)) + 1, bool)
-    for _ in range(rounds):
-        if len(alive) == 0:
-            break
-        aa, bb, cc = a[alive], b[alive], cost[alive]
-        mutual = np.zeros(len(alive), bool)
-        mutual[best_per_key(aa, cc)] = True
-        best_b = np.zeros(len(alive), bool)
-        best_b[best_per_key(bb, cc)] = True
-        mutual &= best_b
-        chosen.append(alive[mutual])
-        used_a[aa[mutual]] = True
-        used_b[bb[mutual]] = True
-        alive = alive[~(used_a[aa] | used_b[bb])]
-    return np.concatenate(chosen) if chosen else np.zeros(0, np.int64)
+    return _mutual_rounds(a, b + (int(a.max(initial=-1)) + 1), cost, np.arange(len(a)), rounds)   # b's apart
 
 
 def disjoint_pairs(a: np.ndarray, b: np.ndarray, cost: np.ndarray, rounds: int = 4) -> np.ndarray:
@@ -206,8 +189,14 @@ def disjoint_pairs(a: np.ndarray, b: np.ndarray, cost: np.ndarray, rounds: int =
     pair (the first of them is kept): as two, at equal cost, each was the other's rival and neither
     was ever chosen."""
     _, first = np.unique(np.column_stack([np.minimum(a, b), np.maximum(a, b)]), axis=0, return_index=True)
+    return _mutual_rounds(a, b, cost, np.sort(first), rounds)
+
+
+def _mutual_rounds(a: np.ndarray, b: np.ndarray, cost: np.ndarray, alive: np.ndarray, rounds: int) -> np.ndarray:
+    """Indices of pairs (a[k], b[k]) among ``alive``, a and b indices of one space, of which no two share
+    an index: in each round the pairs cheapest for both their ends, then every pair touching those is
+    dropped (``one_to_one``, ``disjoint_pairs``)."""
     chosen = []
-    alive = np.sort(first)
     used = np.zeros(int(max(a.max(initial=-1), b.max(initial=-1))) + 1, bool)
     for _ in range(rounds):
         if len(alive) == 0:

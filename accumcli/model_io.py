@@ -385,9 +385,20 @@ def _pose_rows(doc: dict, where: str) -> tuple[np.ndarray, np.ndarray, list]:
     return times, poses, rows
 
 
-def _pose_dict(t_ns: int, T: np.ndarray) -> dict:
+def pose_fields(T: np.ndarray) -> dict:
+    """``translation`` (m) and ``rotation_xyzw`` of a (4, 4) transform, to 9 digits: a pose as poses
+    files and frames files (their ``T_camera_object``) write it; ``pose_of_fields`` reads it."""
     translation, quat = quat_from_transform(T)
-    return {"timestamp_ns": int(t_ns), "translation": _round(translation, 9), "rotation_xyzw": _round(quat, 9)}
+    return {"translation": _round(translation, 9), "rotation_xyzw": _round(quat, 9)}
+
+
+def pose_of_fields(doc: dict) -> np.ndarray:
+    """The (4, 4) transform of ``pose_fields``' dictionary; KeyError, TypeError or ValueError if malformed."""
+    return transform_from_quat(doc["translation"], doc["rotation_xyzw"])
+
+
+def _pose_dict(t_ns: int, T: np.ndarray) -> dict:
+    return {"timestamp_ns": int(t_ns), **pose_fields(T)}
 
 
 def write_poses(target, track: PoseTrack, **header) -> None:
@@ -437,7 +448,7 @@ def read_poses(path) -> PoseTrack:
             if r.get("translation") is None or r.get("rotation_xyzw") is None:
                 poses.append(np.full((4, 4), np.nan))
             else:
-                poses.append(transform_from_quat(r["translation"], r["rotation_xyzw"]))
+                poses.append(pose_of_fields(r))
     except (TypeError, ValueError) as e:
         raise FileFormatError(f"{path}: malformed pose ({type(e).__name__}: {e})") from None
     return PoseTrack(doc.get("parent_frame_id", ""), doc.get("child_frame_id", ""), np.array(times, np.int64),

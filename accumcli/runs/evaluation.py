@@ -11,8 +11,8 @@ import numpy as np
 from ..errors import InputError
 from ..evaluate import Tolerances, evaluate_frames, evaluate_model, pose_errors
 from ..funnel import funnel
-from ..geometry import transform_from_quat
-from ..model_io import check_kind, load_model_doc, read_frames, read_poses, read_truth, segments_from_dict
+from ..model_io import (check_kind, load_model_doc, pose_of_fields, read_frames, read_poses, read_truth,
+                        segments_from_dict)
 from ..outputs import OutputSet
 from ..surface import faces_of, hidden_face, support_face_problem, surface_scores
 from .base import FrameRange, frame_range
@@ -105,9 +105,8 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
 def _recorded_pose(doc: dict) -> np.ndarray | None:
     """A frames file line's recorded ``T_camera_object`` (4, 4), None where malformed."""
     try:
-        quat = np.asarray(doc["rotation_xyzw"], float)
-        return transform_from_quat(doc["translation"], quat / np.linalg.norm(quat))
-    except (KeyError, TypeError, ValueError, ZeroDivisionError):
+        return pose_of_fields(doc)
+    except (KeyError, TypeError, ValueError):
         return None
 
 

@@ -10,9 +10,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..extract import ExtractParams
-from ..geometry import quat_from_transform
 from ..lines2d import StageTimes
-from ..model_io import FramesWriter
+from ..model_io import FramesWriter, pose_fields
 from ..outputs import OutputSet
 from ..row_check import RowCheck
 from .base import FrameRange, Progress, RecordingOptions, frame_range, in_frames, no_progress, nothing_done, path_list
@@ -75,9 +74,7 @@ def extract_recording(recording, output, *, params: ExtractParams = ExtractParam
                         "matched": np.unique(extraction.left_index).astype(int).tolist(),
                         "critical_angle_deg": params.stereo.critical_angle_deg}
                 if frame.T_camera_object is not None:
-                    translation, quat = quat_from_transform(frame.T_camera_object)
-                    header["T_camera_object"] = {"translation": np.round(translation, 9).tolist(),
-                                                 "rotation_xyzw": np.round(quat, 9).tolist()}
+                    header["T_camera_object"] = pose_fields(frame.T_camera_object)
                 out.write(extraction.segments, frame.timestamp_ns, **header)
                 rows.add(extraction, frame.intrinsics, frame.T_camera_object)
                 if viz:
