@@ -887,12 +887,13 @@ def decide(candidates: list[PoseEstimate], params: TrackParams = TrackParams()) 
 
 
 def slides(accepted: Segments, distinct_m: float, max_m: float = 0.04, step_m: float = 0.002,
-           axis_deg: float = 10.0) -> list[np.ndarray]:
+           axis_deg: float = 10.0, max_axes: int = 1, min_axis_share: float = 0.5) -> list[np.ndarray]:
     """Translations S (4, 4), object frame, by which the model slides onto itself along its parallel
     segments: the direction shared (within ``axis_deg``) by the most ``accepted`` segments, if at
-    least half; along it, of the shifts beyond ``distinct_m`` up to ``max_m`` (``step_m`` apart), the
-    one that brings the most segments onto segments (``support_3d``, as for the RANSAC symmetries;
-    the middle one of a tie), if at least half; both ways. Why: a model made mostly of parallel
+    least ``min_axis_share`` of them (then the next such direction of the rest, up to ``max_axes``);
+    along it, of the shifts beyond ``distinct_m`` up to ``max_m`` (``step_m`` apart), the one that
+    brings the most segments onto segments (``support_3d``, as for the RANSAC symmetries; the middle
+    one of a tie), if at least half of all; both ways. Why: a model made mostly of parallel
     edges (an extrusion whose end edges were not accumulated) is pinned along them by its few other
     segments only, and RANSAC over pairs of segments at 30 to 90 degrees cannot propose a slide.
     sim_201's model of the tracking scoreboard has 91 % of its accepted segments along one axis and
@@ -905,17 +906,21 @@ def slides(accepted: Segments, distinct_m: float, max_m: float = 0.04, step_m: f
     # directions and their opposites, not the (N, N) matrix of every pair's cosine
     chord = 2 * np.sin(np.radians(axis_deg) / 2)
     count = cKDTree(np.vstack([d, -d])).query_ball_point(d, chord, return_length=True)
-    members = np.abs(d @ d[np.argmax(count)]) >= np.cos(np.radians(axis_deg))
-    if members.sum() < 0.5 * n:
-        return []
-    axis = np.linalg.svd(d[members], full_matrices=False)[2][0]     # their mean undirected direction
-    shifts = np.arange(distinct_m + step_m, max_m + 1e-9, step_m)
     tree = cKDTree(accepted.centers)          # the model onto itself: one tree for every shift
-    onto = np.array([support_3d(accepted, accepted, make_transform(np.eye(3), t * axis), tree) for t in shifts])
-    if onto.max() < 0.5 * n:
-        return []
-    tied = shifts[onto == onto.max()]           # within support_3d's reach of the best: their middle
-    return [make_transform(np.eye(3), sign * tied[len(tied) // 2] * axis) for sign in (1.0, -1.0)]
+    shifts = np.arange(distinct_m + step_m, max_m + 1e-9, step_m)
+    out, left = [], np.ones(n, bool)
+    for _ in range(max_axes):
+        members = left & (np.abs(d @ d[np.argmax(np.where(left, count, -1))]) >= np.cos(np.radians(axis_deg)))
+        if members.sum() < min_axis_share * n:
+            break
+        left &= ~members
+        axis = np.linalg.svd(d[members], full_matrices=False)[2][0]     # their mean undirected direction
+        onto = np.array([support_3d(accepted, accepted, make_transform(np.eye(3), t * axis), tree) for t in shifts])
+        if onto.max() < 0.5 * n:
+            continue
+        tied = shifts[onto == onto.max()]           # within support_3d's reach of the best: their middle
+        out += [make_transform(np.eye(3), sign * tied[len(tied) // 2] * axis) for sign in (1.0, -1.0)]
+    return out
 
 
 @dataclass
@@ -929,7 +934,8 @@ class PoseTracker:
     def __post_init__(self):
         check_points(self.model.centers, "model segment centres")
         self._accepted = _accepted(self.model)     # what tracking uses, selected once
-        self._symmetries = None
+        self._self_maps: list | None = None   # the model's RANSAC maps onto itself (``symmetries``)
+        self._symmetries: dict[bool, list] = {}
         self._calibrated = False       # the residual limits adapted from the first given pose (``calibrated``)
         self.calibration_refused: str | None = None   # why they were not (the given pose did not fit)
         self.limits_source = "the first frame"        # where the limits in ``params`` come from (for reports)
@@ -937,22 +943,27 @@ class PoseTracker:
         self._recent_rms = collections.deque(maxlen=self.params.recent_frames)   # of the last tracked frames, px
         self._undecided: list[np.ndarray] = []   # the poses of the last 'ambiguous' frame, until one is tracked
 
-    def symmetries(self) -> list[np.ndarray]:
+    def symmetries(self, every_axis: bool = False) -> list[np.ndarray]:
         """The model's near-symmetries: rigid transforms S (4, 4), object frame, more than
         ``distinct_deg`` / ``distinct_m`` from the identity, that bring at least half of the accepted
         segments onto accepted segments (``ransac_pose`` of the model onto itself; computed once),
-        and their inverses; and the model's ``slides`` along its parallel segments.
+        and their inverses; and the model's ``slides`` along its parallel segments: along the direction
+        half of them share, or with ``every_axis`` along each that a quarter share (a grid's shift by one
+        cell along either axis; for a given pose, ``_twins``).
         A re-acquired pose T also tries T S: the images must tell them apart, or it is 'ambiguous'."""
-        if self._symmetries is None:
+        if every_axis not in self._symmetries:
             accepted = self._accepted
-            found = ransac_pose(self.model, accepted, keep=2 * self.params.ransac_hypotheses + 1) if len(accepted) else None
-            found = [T for T, support in (found.hypotheses if found else [])
-                     if support >= 0.5 * len(accepted) and _apart(T, np.eye(4), self.params)]
-            found += [invert(T) for T in found]        # a shift by one square and back
+            if self._self_maps is None:
+                found = ransac_pose(self.model, accepted, keep=2 * self.params.ransac_hypotheses + 1) if len(accepted) else None
+                found = [T for T, support in (found.hypotheses if found else [])
+                         if support >= 0.5 * len(accepted) and _apart(T, np.eye(4), self.params)]
+                self._self_maps = found + [invert(T) for T in found]        # a shift by one square and back
+            found = self._self_maps
+            axes = dict(max_axes=3, min_axis_share=0.25) if every_axis else {}
             # slides along parallel segments, which RANSAC over pairs at 30 to 90 degrees cannot propose
-            self._symmetries = found + [S for S in slides(accepted, self.params.distinct_m)
-                                        if all(_apart(S, T, self.params) for T in found)]
-        return self._symmetries
+            self._symmetries[every_axis] = found + [S for S in slides(accepted, self.params.distinct_m, **axes)
+                                                    if all(_apart(S, T, self.params) for T in found)]
+        return self._symmetries[every_axis]
 
     def predict(self, time_ns: int) -> list[np.ndarray]:
         """Starting poses for a frame at ``time_ns``: constant velocity (``geometry.extrapolate`` from
@@ -1007,6 +1018,24 @@ class PoseTracker:
                    > p.merge_px for c in judged):
                 found.append(restarted)
         return found
+
+    def _twins(self, estimate: PoseEstimate, frame: StereoFrame, grads, every_axis: bool = False
+               ) -> list[PoseEstimate]:
+        """Refinements of ``estimate``'s pose moved by each of the model's ``symmetries`` (method
+        'symmetry': rivals in ``decide``, so the images must tell the poses apart). For a re-acquired
+        pose, and for a given one (the first frame's recorded pose or ``--init``), there with slides along
+        ``every_axis``: on the chessboard an ``--init`` one square (25 mm) off along the board's x axis
+        verified there at a coverage of 0.70 while the right pose, one slide away, covers 0.91; the
+        re-acquisitions keep the slides along one axis, since the cell shifts along x covered 0.78 and
+        0.81 beside right poses at 0.87 and 0.90 (under ``min_margin``: 2 of 13 frames ambiguous)."""
+        p = self.params
+        twins = []
+        for S in self.symmetries(every_axis):
+            twin = _refine(self._accepted, frame, estimate.T_camera_object @ S, p, grads, p.search_px[2:],
+                           p.tukey_px[2:])
+            twin.method = "symmetry"
+            twins.append(twin)
+        return twins
 
     def _suspect(self, candidates: list[PoseEstimate]) -> bool:
         """Whether the best of ``candidates``, though verified, has an RMS over ``suspect_rms_ratio``
@@ -1074,10 +1103,13 @@ class PoseTracker:
                     candidates.append(found)
         if T_guess is None:
             candidates += self._carried(candidates, frame, grads)
+        elif candidates:
+            candidates += self._twins(candidates[0], frame, grads, every_axis=True)
         if T_guess is not None and p.calibrate_limits and not self._calibrated:
             self._calibrated = True
-            if candidates[0].coverage >= p.min_coverage:   # the given pose fits the images: learn from it
-                self.params = p = calibrated(p, candidates[0])
+            given = max(candidates, key=lambda c: c.coverage)   # the given pose's refinement, or a twin that fits better
+            if given.coverage >= p.min_coverage:   # the given pose fits the images: learn from it
+                self.params = p = calibrated(p, given)
                 candidates = [judge(c, p) for c in candidates]
             else:   # a wrong start must not loosen the limits: they wait for the first verified frame
                 self.calibration_refused = (f"the starting pose of the first frame does not fit its images "
@@ -1112,11 +1144,7 @@ class PoseTracker:
                 candidates.append(found)
             verified = [c for c in candidates if c.status == "tracked"]
             for c in sorted(verified, key=_rank, reverse=True)[:1]:    # the best one's symmetric twins
-                for S in self.symmetries():
-                    mirrored = _refine(self._accepted, frame, c.T_camera_object @ S, p, grads, p.search_px[2:],
-                                           p.tukey_px[2:])
-                    mirrored.method = "symmetry"
-                    candidates.append(mirrored)
+                candidates += self._twins(c, frame, grads)
             strict = replace(p, max_std_deg=p.max_std_deg * p.reacquire_std_ratio,
                              max_std_mm=p.max_std_mm * p.reacquire_std_ratio,
                              min_coverage=max(p.min_coverage, p.reacquire_min_coverage))

@@ -923,3 +923,58 @@ def test_ransac_scores_many_poses_at_once_as_one_at_a_time():
     tree = cKDTree(seen.centers)
     each = [support_3d(model, seen, T, tree) for T in poses]
     assert list(_support_all(model, seen, R, t, tree)) == each and each[0] == 60 and min(each) < 60
+
+
+def _grid(cells: int = 6, cell: float = 0.025, piece: float = 0.0125) -> Segments:
+    """A chessboard's model: the lines of a cells x cells grid, cut into pieces of ``piece`` m."""
+    ticks = np.arange(cells + 1) * cell
+    along = np.arange(piece / 2, cells * cell, piece)
+    x_lines = [[t, y, 0.0] for y in ticks for t in along]
+    y_lines = [[x, t, 0.0] for x in ticks for t in along]
+    return _segments(x_lines + y_lines, [[1, 0, 0]] * len(x_lines) + [[0, 1, 0]] * len(y_lines), length=piece)
+
+
+def test_a_grid_slides_by_one_cell_along_each_axis_when_every_axis_is_asked_for():
+    """``slides(..., max_axes=3, min_axis_share=0.25)`` (a given pose's twins): a grid, half of its
+    segments along each axis, shifts onto itself by one cell along x and along y; along one axis that
+    half of the segments share (re-acquisition's twins), at most one of them; a box does not slide
+    either way."""
+    from accumcli.track import slides
+
+    grid = _grid()
+    every = [S[:3, 3] for S in slides(grid, 0.005, max_axes=3, min_axis_share=0.25)]
+    for axis in (0, 1):
+        along = sorted(t[axis] for t in every if abs(t[axis]) > 0.005)
+        assert np.allclose(along, [-0.025, 0.025], atol=0.0015), every
+    assert len(slides(grid, 0.005)) <= 2
+    tracker = PoseTracker(grid)
+    assert len(tracker.symmetries(every_axis=True)) >= len(tracker.symmetries()) + 2
+    rng = np.random.default_rng(1)
+    box = _segments(rng.uniform(-0.03, 0.03, (12, 3)), np.repeat(np.eye(3), 4, axis=0))
+    assert slides(box, 0.005, max_axes=3, min_axis_share=0.25) == []
+
+
+def test_a_starting_pose_one_chessboard_square_off_is_tracked_at_the_right_square(tmp_path):
+    """The real chessboard's first frame from a pose 25 mm off along the board's x axis (one square:
+    the grid fits the image there at a coverage of 0.70): the given pose's twins (``_twins``, slides
+    along every axis) find the right pose, which covers 0.91, and that one is tracked."""
+    from pathlib import Path
+
+    from accumcli.model_io import read_model
+    from accumcli.runs import RecordingOptions, accumulate_recording
+    from accumcli.runs.base import FrameRange
+
+    board = Path(__file__).resolve().parent.parent / "sample_data" / "chessboard"
+    options = RecordingOptions(object_frame="board")
+    accumulate_recording(str(board / "chessboard.mcap"), [str(tmp_path / "board.json")], options=options,
+                         frames=FrameRange(0, 6))
+    model = read_model(str(tmp_path / "board.json"))
+    truth = read_truth(str(board / "chessboard.truth.json"))
+    with options.open(str(board / "chessboard.mcap")) as recording:
+        frame = next(recording.frames())
+    right = truth.pose_at(frame.timestamp_ns)
+    off = right @ make_transform(np.eye(3), [0.025, 0.0, 0.0])
+    found = PoseTracker(model).update(frame, off)
+    rotation, translation = pose_error(found.T_camera_object, right)
+    assert found.status == "tracked" and found.method == "symmetry"
+    assert rotation < 1.0 and translation < 0.002, (rotation, translation)
