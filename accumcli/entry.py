@@ -20,3 +20,18 @@ def main() -> None:
     except KeyboardInterrupt:   # one that came after the command's own handling (while exiting)
         sys.stderr.write("error: interrupted\n")
         sys.exit(130)
+    except SystemExit as done:
+        if not done.code:
+            _finished()
+        raise
+    _finished()
+
+
+def _finished() -> None:
+    """The command succeeded and its outputs are in place: SIGINT and SIGTERM are ignored while the
+    interpreter shuts down (joining worker threads takes a few tenths of a second), where SIGTERM
+    ended the process with exit 143 and no word although its new outputs were already written."""
+    import signal
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_IGN)

@@ -458,11 +458,9 @@ def _check(out: _Output) -> _Output:
                          f"{limit} its folder allows; give a shorter name")
     try:
         fd, probe = tempfile.mkstemp(prefix=TEMP_PREFIX, suffix=TEMP_SUFFIX, dir=folder)
-    except OSError as e:
-        fault = output_error(e, given)
-        if fault is None:
-            raise
-        raise AccumError(f"{given}: cannot create a file in {folder} ({os.strerror(e.errno)}); "
+    except OSError as e:   # whatever the reason (full, read-only, or /proc's "no such file"), one line
+        reason = os.strerror(e.errno) if e.errno else str(e)
+        raise AccumError(f"{given}: cannot create a file in {folder} ({reason}); "
                          "choose a folder you can write to") from None
     os.close(fd)
     os.unlink(probe)

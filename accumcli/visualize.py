@@ -34,8 +34,13 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import rerun as rr
-import rerun.blueprint as rrb
+
+# rerun's own log lines (colours and all, naming our temporary file) would come beside accum's one-line
+# error when an .rrd cannot be written; accum reports every failure of the sink itself. RUST_LOG of
+# the user's shell still wins.
+os.environ.setdefault("RUST_LOG", "off")
+import rerun as rr  # noqa: E402  (after the setting above)
+import rerun.blueprint as rrb  # noqa: E402
 
 from .errors import AccumError
 from .geometry import invert, transform_points

@@ -18,6 +18,17 @@ def _propagate_accum_logs():
     yield
 
 
+@pytest.fixture(autouse=True)
+def _no_interrupt_from_an_earlier_test():
+    """The interrupts a test sent this process stay in its ``outputs`` record (``interrupt_received``),
+    which turns any later error into 'interrupted': each test starts without them."""
+    from accumcli import outputs
+
+    outputs._received.clear()
+    outputs._pending.clear()
+    yield
+
+
 def _make(tmp_path_factory, name: str, **options) -> str:
     path = tmp_path_factory.mktemp("rec") / f"{name}.mcap"
     simulate(str(path), SimulationOptions(**options))

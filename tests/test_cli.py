@@ -737,3 +737,20 @@ def test_track_takes_the_models_object_frame_unless_one_is_given(small_recording
     # without --object-frame the model's frame is the object's: this recording has none of that name
     result = run("track", model, small_recording, "-o", tmp_path / "p.json")
     assert result.exit_code == 1 and "no transform path from 'camera_left' to 'board'" in result.output
+
+
+def test_a_sigterm_after_the_command_succeeded_changes_nothing():
+    """A SIGTERM while the interpreter shuts down after a successful command (its outputs in place)
+    is ignored: it ended the process with exit 143 and no word (a user's script polling for the
+    outputs, then stopping the process)."""
+    import subprocess
+    import sys
+
+    code = ("import atexit, os, signal, sys, time\n"
+            "atexit.register(lambda: (os.kill(os.getpid(), signal.SIGTERM), time.sleep(0.2)))\n"
+            "sys.argv = ['accum', '--help']\n"
+            "from accumcli.entry import main\n"
+            "main()\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, (done.returncode, done.stderr[-500:])
+    assert "Usage" in done.stdout and done.stderr == ""

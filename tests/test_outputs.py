@@ -106,6 +106,7 @@ def test_a_long_name_works(tmp_path):
 @pytest.mark.parametrize("code, message", [
     (errno.EACCES, r"m\.json: cannot create a file in .* \(Permission denied\); choose a folder you can write to$"),
     (errno.EROFS, r"m\.json: cannot create a file in .* \(Read-only file system\)"),
+    (errno.ENOENT, r"m\.json: cannot create a file in .* \(No such file or directory\)"),   # /proc's answer
 ])
 def test_unwritable_folder_is_refused_up_front(tmp_path, monkeypatch, code, message):
     def refuse(*args, **kwargs):
