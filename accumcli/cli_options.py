@@ -6,6 +6,7 @@ and how to extract (``extract_params``: an ``ExtractParams``). Values are parsed
 from __future__ import annotations
 
 import functools
+from dataclasses import replace
 
 import click
 
@@ -70,6 +71,9 @@ def recording_options(func):
         click.option("--left-calibration-topic", default="/stereo/left/calibration", show_default=True),
         click.option("--right-calibration-topic", default="/stereo/right/calibration", show_default=True),
         click.option("--tf-topic", default="/tf", show_default=True),
+        click.option("--tf-static-topic", default=None,
+                     help="Static transforms' topic.  [default: the --tf-topic's name + '_static': /tf_static, "
+                          "or /robot/tf_static for --tf-topic /robot/tf]"),
     ]
     for option in reversed(options):
         func = option(func)
@@ -82,6 +86,7 @@ def recording_options(func):
         topics = Topics(left_image=kwargs.pop("left_topic"), right_image=kwargs.pop("right_topic"),
                         left_calibration=kwargs.pop("left_calibration_topic"),
                         right_calibration=kwargs.pop("right_calibration_topic"), tf=kwargs.pop("tf_topic"))
+        topics = replace(topics, tf_static=kwargs.pop("tf_static_topic") or f"{topics.tf}_static")
         kwargs["options"] = RecordingOptions(topics, kwargs.pop("camera_frame"), kwargs.pop("object_frame"),
                                              int(round(kwargs.pop("tolerance_ms") * 1e6)))
         return func(*args, **kwargs)

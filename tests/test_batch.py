@@ -100,3 +100,15 @@ def test_a_batch_folder_named_dash_is_a_folder(recordings, tmp_path, monkeypatch
     result = CliRunner().invoke(main, ["batch", *recordings[:1], "-o", "-", "--frames", "0:2", "--workers", "1"])
     assert result.exit_code == 0, result.output
     assert (tmp_path / "-" / "summary.csv").exists()
+
+
+def test_the_truth_sidecar_of_a_rosbag2_folder_is_beside_it():
+    """NAME.truth.json beside NAME.mcap, and beside a rosbag2 folder NAME (it has no suffix: its
+    sidecar was looked for as '.truth.json')."""
+    from pathlib import Path
+
+    from accumcli.batch import _sidecar
+
+    assert _sidecar(Path("data/box.mcap")) == Path("data/box.truth.json")
+    assert _sidecar(Path("data/box_bag")) == Path("data/box_bag.truth.json")
+    assert _sidecar(Path("data/run.2.db3")) == Path("data/run.2.truth.json")

@@ -754,3 +754,20 @@ def test_a_sigterm_after_the_command_succeeded_changes_nothing():
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, (done.returncode, done.stderr[-500:])
     assert "Usage" in done.stdout and done.stderr == ""
+
+
+def test_frames_without_a_pose_at_their_times_are_one_reason_with_a_word_on_the_clocks():
+    """A camera stamping from its boot (1234 s) and transforms from 1970: 36 reasons that differ only in
+    the frame's time are one, with the range of times and a remark on the clocks."""
+    from accumcli.runs.base import nothing_done
+
+    reasons = {f"base_link -> tool0: time {1234 + i / 10:.3f} s is outside the transform samples "
+               "[1749999999.800, 1750000003.700] s": 1 for i in range(36)}
+    reasons["image decode failed"] = 2
+    message = str(nothing_done("bag", "nothing was accumulated", reasons))
+    assert message.count("frame(s)") == 2 and len(message) < 400, message
+    assert ("36 frame(s): base_link -> tool0: time 1234.000 to 1237.500 s is outside the transform samples "
+            "[1749999999.800, 1750000003.700] s, 1749998762 s away: the images and the transforms seem to be "
+            "stamped by different clocks") in message
+    near = {"a -> b: time 10.000 s is outside the transform samples [10.500, 20.000] s": 1}
+    assert "clocks" not in str(nothing_done("bag", "nothing", near))

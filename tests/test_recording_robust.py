@@ -338,6 +338,17 @@ def test_no_stereo_pair_names_the_offset_and_the_tolerance(tmp_path):
         assert rec.info().stereo_offset_ms == pytest.approx(5.0)
 
 
+def test_the_proposed_tolerance_pairs_cameras_whose_offset_varies(tmp_path):
+    """Right images 3 to 5.5 ms after the left (no hardware sync): the proposal covers the largest
+    offsets, not the median (which proposed 5 ms and left a quarter of the images unpaired)."""
+    offsets = [3_000_000 + (i % 6) * 500_000 for i in range(12)]
+    path = fuzz.build(tmp_path / "r.mcap", n=12, right_times=[T0 + i * PERIOD + d for i, d in enumerate(offsets)])
+    with pytest.raises(RecordingError, match=r"try --tolerance-ms 6$"):
+        Recording(path)
+    with Recording(path, tolerance_ns=6_000_000) as rec:
+        assert len(list(rec.frames())) == 12 and rec.info().unpaired_images == 0
+
+
 def test_unpaired_warnings_are_summarised(tmp_path, caplog):
     n = 12
     right = [T0 + i * PERIOD + (20_000_000 if i % 2 else 0) for i in range(n)]

@@ -262,3 +262,46 @@ def test_damaged_bags_are_one_line_errors(ros_forms, tmp_path):
     half.write_bytes(data[:len(data) // 2])
     with pytest.raises(RecordingError, match="half.db3: cannot be read as a rosbag2 bag"):
         Recording(half)
+
+
+def _namespaced_bag(path, static_topic: str | None):
+    """A ROS 2 bag whose camera mount (base -> camera_left) is on ``static_topic`` (None: nowhere) and
+    whose gripper moves on /robot/tf."""
+    from accumcli.recording.messages import image_to_msg
+    from accumcli.recording.ros2 import ros_from_foxglove
+
+    with Rosbag2Writer(path) as w:
+        for side in ("left", "right"):
+            w.calibration(f"/stereo/{side}/calibration", helpers.calibration(side), helpers.T0)
+        if static_topic:
+            w.raw_transform("base", "camera_left", (0.0, 0.0, -0.5), (0, 0, 0, 1), helpers.T0, topic=static_topic)
+        for i in range(3):
+            t = helpers.T0 + i * helpers.PERIOD
+            w.raw_transform("base", "gripper", (0.01 * i, 0.0, 0.0), (0, 0, 0, 1), t, topic="/robot/tf")
+            for side in ("left", "right"):
+                w.ros_message(f"/stereo/{side}/image",
+                              ros_from_foxglove(image_to_msg(helpers.image(i), t, "camera_left", "mono8")), t)
+
+
+def test_a_namespaced_transform_tree_is_read_with_its_own_static_topic(tmp_path):
+    """--tf-topic /robot/tf reads /robot/tf_static too (--tf-static-topic's default); with the static
+    topic left at /tf_static the error names the one the bag has, and without any static transform it
+    says that none arrived (a split bag's later file)."""
+    from click.testing import CliRunner
+
+    from accumcli.cli import main
+
+    path = tmp_path / "robot"
+    _namespaced_bag(path, "/robot/tf_static")
+    info = CliRunner().invoke(main, ["info", str(path), "--tf-topic", "/robot/tf"])
+    assert info.exit_code == 0 and "poses        gripper in camera_left: 3/3 frames" in info.output, info.output
+    with pytest.raises(RecordingError, match="the recording has /robot/tf_static: try --tf-static-topic "
+                                             "/robot/tf_static"):
+        Recording(path, Topics(tf="/robot/tf"))
+    with Recording(path, Topics(tf="/robot/tf", tf_static="/robot/tf_static")) as rec:
+        assert [round(f.T_camera_object[2, 3], 6) for f in rec.frames()] == [0.5, 0.5, 0.5]
+    bare = tmp_path / "bare"
+    _namespaced_bag(bare, None)
+    with pytest.raises(RecordingError, match="no transform names 'camera_left', the images' own frame; /tf_static "
+                                             "has no message here"):
+        Recording(bare, Topics(tf="/robot/tf"))

@@ -99,8 +99,40 @@ def nothing_done(path, what: str, skipped: dict[str, int] | None = None, rec=Non
     """The error for a run that would produce nothing: which frames were skipped, and why (``skipped``,
     and the frames the recording ``rec`` could not decode, first: they never reach a run)."""
     reasons = {**(getattr(rec, "undecodable", None) or {}), **(skipped or {})}
-    listed = "; ".join(f"{n} frame(s): {why}" for why, n in reasons.items())
+    listed = "; ".join(f"{n} frame(s): {why}" for why, n in _grouped_by_time(reasons).items())
     return AccumError(f"{path}: {what}" + (f" ({listed})" if listed else ""))
+
+
+_FRAME_TIME = re.compile(r"time (-?\d+(?:\.\d+)?) s is outside the transform samples \[(-?[\d.]+), (-?[\d.]+)\] s")
+
+
+def _grouped_by_time(reasons: dict[str, int]) -> dict[str, int]:
+    """``reasons`` (why -> frames) with the reasons that differ only in the frame's time (a pose outside
+    the transforms' time range) as one, naming the range of times; where those times lie more than a
+    minute from the transforms', a remark on the clocks (36 such reasons made one line of 4,350
+    characters: the camera's clock counted from its boot, the transforms' from 1970)."""
+    grouped: dict[str, list] = {}
+    for why, n in reasons.items():
+        found = _FRAME_TIME.search(why)
+        key = why if found is None else _FRAME_TIME.sub("time {} s is outside the transform samples [{}, {}] s", why)
+        entry = grouped.setdefault(key, [0, [], found])
+        entry[0] += n
+        if found is not None:
+            entry[1].append(float(found.group(1)))
+    out = {}
+    for key, (n, times, found) in grouped.items():
+        if found is None:
+            out[key] = n
+            continue
+        lo, hi = float(found.group(2)), float(found.group(3))
+        span = f"{min(times):.3f}" if min(times) == max(times) else f"{min(times):.3f} to {max(times):.3f}"
+        text = key.format(span, found.group(2), found.group(3))
+        gap = max(lo - max(times), min(times) - hi)
+        if gap > 60:
+            text += (f", {gap:.0f} s away: the images and the transforms seem to be stamped by different clocks; "
+                     "record both with one clock")
+        out[text] = n
+    return out
 
 
 def in_frames(frames: "FrameRange") -> str:
