@@ -471,7 +471,9 @@ def view(inputs, rrd, spawn, connect, png, png_frame, frames, options):
     (.jsonl, from extract), poses files (.json, from track) and truth sidecars,
     recognised by content. With a recording, world is the left camera frame and
     each model is placed at the object's pose in every frame (the poses file's
-    if given, else the recording's).
+    if given, else the recording's; the object's frame is the one the models
+    name unless --object-frame is given). --frames selects recording frames,
+    also of a frames file (its lines' frame_index).
 
     \b
     Examples:
@@ -480,8 +482,9 @@ def view(inputs, rrd, spawn, connect, png, png_frame, frames, options):
     """
     from .runs import view as run
 
+    given = click.get_current_context().get_parameter_source("object_frame") != ParameterSource.DEFAULT
     written = run_with_progress("logging", run, inputs, rrd=rrd, spawn=spawn, connect=connect, png=png,
-                                png_frame=png_frame, options=options, frames=frames)
+                                png_frame=png_frame, options=options, frames=frames, object_frame_of_model=not given)
     if written:
         _wrote(written)
 

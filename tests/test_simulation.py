@@ -46,12 +46,15 @@ def test_truth_sidecar_contents(small_recording):
     truth = read_truth(small_recording.replace(".mcap", ".truth.json"))
     doc = json.load(open(small_recording.replace(".mcap", ".truth.json")))
     assert doc["format"] == "accum.truth/1" and doc["object_frame"] == "gripper"
-    assert set(truth.kinds) == {"object", "stripe", "gripper"}
+    # formats.md's part and kind on every edge: the object's creases and painted stripes, the gripper's creases
+    assert {(e["part"], e["kind"]) for e in doc["edges"]} == {("object", "crease"), ("object", "paint"),
+                                                               ("gripper", "crease")}
     n_frames = len(truth.poses)
     seen = np.concatenate(truth.seen)
     assert seen.min() >= 0 and seen.max() <= n_frames
     # the object faces the camera: a good share of its edges is seen, and never all (the back is hidden)
-    object_seen = np.concatenate([s for s, k in zip(truth.seen, truth.kinds) if k == "object"])
+    creases = [e["part"] == "object" and e["kind"] == "crease" for e in doc["edges"]]
+    object_seen = np.concatenate([s for s, crease in zip(truth.seen, creases) if crease])
     assert 0.2 < np.mean(object_seen >= 1) < 0.95
     # edge samples follow formats.md: sample i of k at a + (i + 0.5) / k (b - a), about 2 mm apart
     lengths = np.linalg.norm(truth.b - truth.a, axis=1)

@@ -210,6 +210,12 @@ def test_track_command_writes_poses_json_and_mcap(noisy_pair, tmp_path):
     for option in ("--poses-topic", "--poses-child-frame"):   # an empty name was written, or became the default
         bad = runner.invoke(main, ["track", str(model), exact, "-o", str(poses_mcap), option, " "])
         assert bad.exit_code == 1 and f"({option}): expected a name" in bad.output
+    own = runner.invoke(main, ["track", str(model), exact, "-o", str(poses_mcap), "--poses-child-frame", "camera_left",
+                               "--frames", "0:1"])   # the camera frame as its own parent
+    assert own.exit_code == 1 and "a frame cannot be its own parent" in own.output
+    second = runner.invoke(main, ["track", str(model), exact, "-o", str(tmp_path / "g.mcap"), "--poses-child-frame",
+                                  "gripper", "--frames", "0:1"])
+    assert second.exit_code == 0 and "give it a second parent" in second.output
     # a model of another object (scaled by 1.5) tracks nothing: the TUM and MCAP outputs are empty, and said so
     doc = json.loads(model.read_text())
     for s in doc["segments"]:

@@ -328,3 +328,30 @@ def test_a_full_disk_under_the_rrd_is_one_error_line(tmp_path, monkeypatch):
     monkeypatch.setattr(os, "statvfs", lambda folder: SimpleNamespace(f_bavail=1 << 30, f_frsize=4096))
     with pytest.raises(AccumError, match=r"Rerun could not write the recording .*shut down prematurely"):
         log.close()
+
+
+def test_view_places_a_model_in_its_own_frame_and_frames_selects_a_frames_files_lines(small_recording, tmp_path):
+    """The chessboard with its model (frame 'board') and no --object-frame: the model is placed in
+    every frame (it was not shown, and nothing said); --frames 1:3 shows the frames file's lines of
+    frames 1 and 2 only (it showed every line)."""
+    from pathlib import Path
+
+    from accumcli.model_io import read_truth, write_model
+    from accumcli.runs import FrameRange, extract_recording, view
+    from accumcli.segments import Segments
+
+    board = Path(__file__).resolve().parent.parent / "sample_data" / "chessboard"
+    truth = read_truth(str(board / "chessboard.truth.json"))
+    length = np.linalg.norm(truth.b - truth.a, axis=1)
+    model = Segments("board", (truth.a + truth.b) / 2, (truth.b - truth.a) / length[:, None], length,
+                     np.ones(len(length)), np.full(len(length), 3, np.int64))
+    write_model(tmp_path / "board.json", model)
+    rrd = tmp_path / "board.rrd"
+    view([str(board / "chessboard.mcap"), str(tmp_path / "board.json")], rrd=str(rrd), object_frame_of_model=True,
+         frames=FrameRange(0, 3))
+    assert len(rrd_column(str(rrd), "world/model/board/accepted", "LineStrips3D:strips")) == 3
+    frames_file = tmp_path / "frames.jsonl"
+    extract_recording(small_recording, str(frames_file), frames=FrameRange(0, 4))
+    rrd = tmp_path / "frames.rrd"
+    view([small_recording, str(frames_file)], rrd=str(rrd), frames=FrameRange(1, 3))
+    assert len(rrd_column(str(rrd), "world/frame_segments", "LineStrips3D:strips")) == 2

@@ -81,6 +81,10 @@ class FrameRange:
     def __str__(self) -> str:
         return f"{self.start}:{'' if self.stop is None else self.stop}"
 
+    def contains(self, index: int) -> bool:
+        """Whether frame ``index`` lies in the range."""
+        return index >= self.start and (self.stop is None or index < self.stop)
+
     def count_in(self, total: int) -> int:
         """How many of ``total`` frames the range selects."""
         return max(0, (total if self.stop is None else min(self.stop, total)) - self.start)

@@ -78,7 +78,7 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
         return _warn_unjudged(pose_errors(times, track.poses[keep], track.status[keep], truth), path, truth_path)
     if kind == "frames":
         rows = [row for i, row in enumerate(read_frames(path))
-                if i >= frames.start and (frames.stop is None or i < frames.stop)]
+                if frames.contains(i)]
         times = np.array([t for t, _, _ in rows], np.int64)
         if not rows:
             _check_selected(0, sum(1 for _ in read_frames(path)), frames, path)

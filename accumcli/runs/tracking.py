@@ -93,6 +93,7 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
     t0 = time.perf_counter()
     with options.open(recording, require_pose=init_pose is None) as rec, files:
         total = frames.check(rec)
+        _check_child_frame(poses_child_frame, rec, [p for p in outputs if str(p).lower().endswith(".mcap")])
         if model.frame_id and model.frame_id != rec.object_frame:   # --object-frame given: the user's choice
             log.warning("%s: the model is in frame %r, tracked as the recording's %r (--object-frame): the same "
                         "object under another name, or a wrong model (then nothing is tracked)", model_path,
@@ -143,3 +144,18 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
                         ", ".join(empty), "s" if len(empty) == 1 else "")
     return TrackingResult(track, time.perf_counter() - t0, [str(p) for p in (*outputs, rrd) if p], tracker.params,
                           tracker.limits_source)
+
+
+def _check_child_frame(child: str | None, rec, mcap_outputs) -> None:
+    """The poses MCAP's FrameTransforms go from the camera frame to ``child``: the camera frame itself
+    would be its own parent (InputError), and the object frame of the recording gets a second parent
+    beside its recorded one (a warning: Foxglove shows one of them)."""
+    if child is None or not mcap_outputs:
+        return
+    if child == rec.camera_frame:
+        raise InputError(f"--poses-child-frame {child}: that is the poses' parent frame (the camera's), and a "
+                         f"frame cannot be its own parent; give another name (default {rec.object_frame}_tracked)")
+    if child in rec.tree.frames:
+        log.warning("--poses-child-frame %s: the recording's transform tree has that frame already; the tracked "
+                    "poses give it a second parent, and Foxglove shows one of the two (default %s_tracked)",
+                    child, rec.object_frame)

@@ -4,7 +4,7 @@ as a picture."""
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -102,22 +102,31 @@ class ViewInputs:
 
 def view(paths, *, rrd=None, spawn: bool = False, connect: str | None = None, png=None,
          png_frame: int | None = None, options: RecordingOptions = RecordingOptions(),
-         frames: FrameRange = FrameRange(), progress: Progress = no_progress) -> list[str]:
+         frames: FrameRange = FrameRange(), progress: Progress = no_progress,
+         object_frame_of_model: bool = False) -> list[str]:
     """Show ``paths`` in Rerun (exactly one of ``rrd``, ``spawn``, ``connect``) and/or draw ``png``.
     With a recording, world is the left camera frame and each model (and the truth) is placed at the
     object's pose in every frame: a poses file's where it has that frame (none where that frame is
     not 'tracked': the tracker's status and reason are logged on ``pose_source``), else the
     recording's. Without a recording but with poses files, the same at each of their times (no
     images). With neither, world is the object frame: the models and truth as they are, a frames
-    file's segments placed by its lines' ``T_camera_object``. Returns the files written."""
+    file's segments placed by its lines' ``T_camera_object``. ``frames`` selects recording frames, of a
+    frames file by its lines' ``frame_index``. ``object_frame_of_model``: the recording's object frame is
+    the one the models name, when they name one (``options.object_frame`` is then only a default: on the
+    chessboard, whose model is in 'board', the view showed no model and said nothing). Returns the
+    files written."""
     paths, frames = path_list(paths, "paths"), frame_range(frames)
     if sum(map(bool, (rrd, spawn, connect))) > 1:
         raise InputError("choose one of --rrd, --spawn and --connect")
     if not (rrd or spawn or connect or png):
         raise InputError("nothing to do: give --rrd, --spawn, --connect or --png")
-    if png_frame is not None and not (png_frame >= frames.start and (frames.stop is None or png_frame < frames.stop)):
+    if png_frame is not None and not frames.contains(png_frame):
         raise InputError(f"--png-frame {png_frame} lies outside --frames {frames}")
     inputs = ViewInputs.of(paths)
+    named = {m.frame_id for m in inputs.models.values() if m.frame_id}
+    if object_frame_of_model and len(named) == 1 and options.object_frame not in named:
+        options = replace(options, object_frame=named.pop())
+        log.info("the object's frame is the model's: %s (--object-frame shows it in another)", options.object_frame)
     files = OutputSet([rrd, png], inputs=paths)
     with files:
         if rrd or spawn or connect:
@@ -165,6 +174,8 @@ def _log_to_rerun(inputs: ViewInputs, rrd, spawn, connect, options, frames, prog
     for path in inputs.frames_files:
         unplaced = 0
         for index, (t_ns, segments, doc) in enumerate(read_frames(path)):
+            if not frames.contains(doc.get("frame_index", index)):
+                continue
             T_world_camera = np.eye(4)
             if object_world:   # the line's pose places its segments beside the model
                 pose = doc.get("T_camera_object")

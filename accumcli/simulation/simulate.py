@@ -352,11 +352,16 @@ def _write_poses(writer: RecordingWriter, topics: Topics, o: SimulationOptions, 
             writer.transform("camera_left", "gripper", T_cam_obj, int(t_ns), topic=topics.tf)
 
 
+# the scene's edge kinds as formats.md's part and kind (the random scene's terms)
+PART_KIND = {"object": ("object", "crease"), "stripe": ("object", "paint"), "gripper": ("gripper", "crease")}
+
+
 def _truth_document(meta: dict, edges, samples, owner, seen, image_times, poses, camera) -> dict:
     doc_edges = []
     for index, (a, b, kind) in enumerate(edges):
+        part, kind = PART_KIND[kind]
         doc_edges.append({"a": [round(float(x), 9) for x in a], "b": [round(float(x), 9) for x in b],
-                          "kind": kind, "seen": seen[owner == index].tolist()})
+                          "part": part, "kind": kind, "seen": seen[owner == index].tolist()})
     doc_poses = []
     for t_ns, T in zip(image_times, poses):
         translation, quat = quat_from_transform(T)
@@ -366,6 +371,6 @@ def _truth_document(meta: dict, edges, samples, owner, seen, image_times, poses,
             "edges": doc_edges, "poses": doc_poses,
             "simulation": {**meta, "fx": camera.fx, "cx": camera.cx, "cy": camera.cy,
                            "sample_spacing_m": SAMPLE_SPACING_M, "min_step_grey": MIN_STEP * 255,
-                           "edge_kinds": {"object": "edge of the object's polyhedron",
-                                          "stripe": "boundary of a painted stripe on the object",
-                                          "gripper": "edge of the gripper's fingers, palm or wrist"}}}
+                           "edge_kinds": {"crease": "edge of the object's polyhedron or of the gripper's "
+                                                    "fingers, palm or wrist",
+                                          "paint": "boundary of a painted stripe on the object"}}}
