@@ -71,6 +71,9 @@ def recording_options(func):
         click.option("--left-calibration-topic", default="/stereo/left/calibration", show_default=True),
         click.option("--right-calibration-topic", default="/stereo/right/calibration", show_default=True),
         click.option("--tf-topic", default="/tf", show_default=True),
+        click.option("--time-offset-ms", type=float, default=0.0, show_default=True,
+                     help="Look the poses up this long after each image's stamp: where the camera's clock runs "
+                          "ahead of the robot's, minus that (accumulate warns when the motion says the stamps are off)."),
         click.option("--tf-static-topic", default=None,
                      help="Static transforms' topic.  [default: the --tf-topic's name + '_static': /tf_static, "
                           "or /robot/tf_static for --tf-topic /robot/tf]"),
@@ -88,7 +91,8 @@ def recording_options(func):
                         right_calibration=kwargs.pop("right_calibration_topic"), tf=kwargs.pop("tf_topic"))
         topics = replace(topics, tf_static=kwargs.pop("tf_static_topic") or f"{topics.tf}_static")
         kwargs["options"] = RecordingOptions(topics, kwargs.pop("camera_frame"), kwargs.pop("object_frame"),
-                                             int(round(kwargs.pop("tolerance_ms") * 1e6)))
+                                             int(round(kwargs.pop("tolerance_ms") * 1e6)),
+                                             int(round(kwargs.pop("time_offset_ms") * 1e6)))
         return func(*args, **kwargs)
 
     return wrapper

@@ -83,3 +83,46 @@ def test_jittering_poses_are_named_and_exact_ones_are_not():
         assert noisy.near_share() < 0.09 and "the recorded poses seem to jitter" in noisy.jitter_warning(), seed
     for noise in ((0.0, 0.0), (0.05, 0.0001)):
         assert _check(1.0, frames=30, pose_noise=noise, count=60).jitter_warning() is None
+
+
+def _swinging(lag_ms: float, frames: int = 30, count: int = 300, swing: float = 1.0):
+    """(segments in the camera frame, recorded T_camera_object, stamp) of an object of random segments
+    swinging about its centre (yaw 25 deg * ``swing`` * sin, a 2 s period, and 30 mm * ``swing``
+    sideways) 0.6 m in front of the camera at
+    10 frames/s; each image shows the object ``lag_ms`` before its stamp, the recorded pose is the
+    stamp's."""
+    rng = np.random.default_rng(4)
+    centers = rng.uniform(-0.05, 0.05, (count, 3))
+    directions = rng.normal(size=(count, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+
+    def pose(t: float) -> np.ndarray:
+        phase = swing * np.sin(np.pi * t)
+        rotation = Rotation.from_rotvec([0.0, np.radians(25.0) * phase, np.radians(5.0) * phase])
+        return make_transform(rotation.as_matrix(), [0.03 * phase, 0.0, 0.6])
+
+    for k in range(frames):
+        t = 0.1 * k
+        shown = pose(t - lag_ms / 1000)
+        seen = Segments("camera_left", transform_points(shown, centers), directions @ shown[:3, :3].T,
+                        np.full(count, 0.01), np.ones(count), np.ones(count, np.int64),
+                        {"sigma_direction_rad": np.full(count, 0.01)})
+        yield seen, pose(t), int(round(t * 1e9)) + 1_700_000_000_000_000_000
+
+
+def test_images_stamped_apart_from_their_poses_are_named_with_the_offset_to_give():
+    """Images that show the object 50 ms before (or 30 ms after) their stamps: the check proposes the
+    --time-offset-ms that looks the poses up at the moment shown; on time, or a still object, it says
+    nothing."""
+    def warning(lag_ms, **swing):
+        check = MotionCheck()
+        for segments, T, t_ns in _swinging(lag_ms, **swing):
+            check.add(segments, T, t_ns)
+        return check.offset_warning()
+
+    late = warning(50.0)
+    assert late is not None and late.startswith("the images seem stamped 50 ms after the moment they show")
+    assert late.endswith("try --time-offset-ms -50")
+    assert warning(-30.0).endswith("try --time-offset-ms 30")
+    assert warning(0.0) is None
+    assert warning(50.0, swing=0.0) is None

@@ -392,3 +392,21 @@ def test_a_first_frame_darker_than_the_rest_does_not_saturate_them(small_recordi
     for frame, original in enumerate(originals):
         assert np.abs(decoded[frame].astype(int) - original).mean() < 1.5, frame
         assert np.array_equal(again[frame], decoded[frame]), frame   # the scale of a later frame does not carry over
+
+
+def test_a_time_offset_looks_the_poses_up_that_much_later(small_recording):
+    """``time_offset_ns`` (--time-offset-ms): frame k's pose is the one of the stamp one frame period
+    later, i.e. frame k + 1's without an offset."""
+    import numpy as np
+
+    from accumcli.recording import Recording
+
+    with Recording(small_recording) as rec:
+        frames = list(rec.frames(0, 3))
+    period = frames[1].timestamp_ns - frames[0].timestamp_ns
+    with Recording(small_recording, time_offset_ns=period) as rec:
+        shifted = list(rec.frames(0, 2))
+    assert [f.timestamp_ns for f in shifted] == [f.timestamp_ns for f in frames[:2]]   # the stamps stay
+    for k in range(2):
+        assert np.allclose(shifted[k].T_camera_object, frames[k + 1].T_camera_object, atol=1e-9)
+    assert not np.allclose(shifted[0].T_camera_object, frames[0].T_camera_object, atol=1e-4)

@@ -251,8 +251,10 @@ class Recording:
     """
 
     def __init__(self, path, topics: Topics = Topics(), camera_frame: str = "camera_left",
-                 object_frame: str = "gripper", tolerance_ns: int = 1_000_000, require_pose: bool = True):
+                 object_frame: str = "gripper", tolerance_ns: int = 1_000_000, require_pose: bool = True,
+                 time_offset_ns: int = 0):
         self.path = str(path)
+        self.time_offset_ns = int(time_offset_ns)   # poses are looked up this long after an image's stamp
         self.topics = topics
         self.camera_frame = camera_frame
         self.object_frame = object_frame
@@ -592,8 +594,10 @@ class Recording:
         return self._rectifiers[key]
 
     def pose_at(self, t_ns: int) -> np.ndarray:
-        """``T_camera_object`` at ``t_ns``; raises ``PoseUnavailable``."""
-        return self.tree.lookup(self.camera_frame, self.object_frame, t_ns, self.tolerance_ns)
+        """``T_camera_object`` for an image stamped ``t_ns``: the transforms at ``t_ns`` plus the
+        recording's ``time_offset_ns`` (``--time-offset-ms``: a camera clock apart from the robot's);
+        raises ``PoseUnavailable``."""
+        return self.tree.lookup(self.camera_frame, self.object_frame, t_ns + self.time_offset_ns, self.tolerance_ns)
 
     def frames(self, start: int = 0, stop: int | None = None) -> Iterator[StereoFrame]:
         """Stream the stereo frames with index in [start, stop). A frame with the stamp of the frame

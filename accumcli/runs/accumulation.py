@@ -46,6 +46,7 @@ class AccumulationResult:
 
     model: Segments
     row_warning: str | None = None   # what the rows' check (``row_check``) found, None when nothing
+    offset_warning: str | None = None  # what the images' time stamps' check (``motion_check``) found
     scale_warning: str | None = None   # what the depth scale's check (``motion_check``) found
     jitter_warning: str | None = None  # what the recorded poses' jitter check (``motion_check``) found
     frames: int = 0
@@ -140,7 +141,7 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
                 step = acc.step(frame, frame.T_camera_object, extraction,
                                 T_corrected=None if poses is None else poses[frame.index])
                 rows.add(step.extraction, frame.intrinsics, frame.T_camera_object)
-                motion_check.add(step.extraction.segments, frame.T_camera_object)   # the recorded motion
+                motion_check.add(step.extraction.segments, frame.T_camera_object, frame.timestamp_ns)   # the recorded motion
                 result.distances_m.append(float(np.linalg.norm(frame.T_camera_object[:3, 3])))
                 if truth is not None and len(recorded) < POSES_COMPARED:
                     recorded.append((frame.timestamp_ns, frame.T_camera_object))
@@ -177,11 +178,13 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
         if result.accepted == 0:     # nothing claimed: units or frames are likely wrong, or too few frames
             log.warning("%s: the model accepted no segment: %s", recording, _nothing_accepted(result))
         result.row_warning = rows.report(recording, params.extract.stereo.row_offset_px)
-        result.scale_warning = motion_check.scale_warning()
-        # a wrong scale also scatters re-observations: named once, by its cause; --motion tracked repairs jitter
-        if not result.scale_warning and params.motion != "tracked":
+        # a wrong clock or scale also scatters re-observations: named once, by its cause; --motion tracked
+        # repairs jitter
+        result.offset_warning = motion_check.offset_warning(options.time_offset_ns * 1e-6)
+        result.scale_warning = None if result.offset_warning else motion_check.scale_warning()
+        if not (result.offset_warning or result.scale_warning) and params.motion != "tracked":
             result.jitter_warning = motion_check.jitter_warning()
-        for text in (result.scale_warning, result.jitter_warning):
+        for text in (result.offset_warning, result.scale_warning, result.jitter_warning):
             if text:
                 log.warning("%s: %s", recording, text)
         result.refined_frames = sum(not np.allclose(T, np.eye(4)) for T in acc.T_recorded_model)
@@ -329,3 +332,4 @@ def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str,
             measured[k] = (x[k] + found[0], found[1])   # T_recorded exp(x_k) exp(c) ~ T_recorded exp(x_k + c)
     x = fuse(links, len(recorded), motion, measured)
     return {index: corrected(T, xk) for (index, T), xk in zip(recorded, x)}
+

@@ -37,13 +37,14 @@ class RecordingOptions:
     camera_frame: str = "camera_left"
     object_frame: str = "gripper"
     tolerance_ns: int = 1_000_000
+    time_offset_ns: int = 0     # poses are looked up this long after an image's stamp (``Recording.pose_at``)
 
     def open(self, path, require_pose: bool = True) -> Recording:
         """The recording at ``path``; with ``require_pose`` a transform path from the camera
         frame to the object frame must exist (extraction needs none)."""
         return Recording(path, topics=self.topics, camera_frame=self.camera_frame,
                          object_frame=self.object_frame, tolerance_ns=self.tolerance_ns,
-                         require_pose=require_pose)
+                         require_pose=require_pose, time_offset_ns=self.time_offset_ns)
 
 
 _RANGE = re.compile(r"^\s*(\d*)\s*:\s*(\d*)\s*$")
