@@ -144,15 +144,16 @@ class MotionCheck:
         frame), where the offset time lies between two frames."""
         if len(self._timed) < 2:
             return
-        times = np.array([t for t, _, _, _ in self._timed], np.int64)
+        stamps = np.array([t for t, _, _, _ in self._timed], np.int64)
+        times = (stamps - stamps[0]).astype(float)     # from the first: exact in float (stamps near 2^63 were not)
         poses = np.stack([T for _, T, _, _ in self._timed])
-        wanted = times[:, None] + OFFSETS_MS[None, :] * 1_000_000          # (frames, offsets)
+        wanted = times[:, None] + OFFSETS_MS[None, :] * 1e6          # (frames, offsets), ns from the first
         inside = (wanted >= times[0]) & (wanted <= times[-1])
         shifted = np.full(wanted.shape + (4, 4), np.nan)
-        if inside.any():
-            at = wanted[inside].astype(float)
-            rotation = Slerp(times.astype(float), Rotation.from_matrix(poses[:, :3, :3]))(at).as_matrix()
-            translation = np.column_stack([np.interp(at, times.astype(float), poses[:, i, 3]) for i in range(3)])
+        if inside.any() and (np.diff(times) > 0).all():
+            at = wanted[inside]
+            rotation = Slerp(times, Rotation.from_matrix(poses[:, :3, :3]))(at).as_matrix()
+            translation = np.column_stack([np.interp(at, times, poses[:, i, 3]) for i in range(3)])
             block = np.zeros((len(at), 4, 4))
             block[:, :3, :3], block[:, :3, 3], block[:, 3, 3] = rotation, translation, 1.0
             shifted[inside] = block
