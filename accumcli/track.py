@@ -1023,8 +1023,8 @@ class PoseTracker:
                ) -> list[PoseEstimate]:
         """Refinements of ``estimate``'s pose moved by each of the model's ``symmetries`` (method
         'symmetry': rivals in ``decide``, so the images must tell the poses apart). For a re-acquired
-        pose, and for a given one (the first frame's recorded pose or ``--init``), there with slides along
-        ``every_axis``: on the chessboard an ``--init`` one square (25 mm) off along the board's x axis
+        pose, and for a user's starting pose (``--init``, ``update``'s ``rough_guess``), there with slides
+        along ``every_axis``: on the chessboard an ``--init`` one square (25 mm) off along the board's x axis
         verified there at a coverage of 0.70 while the right pose, one slide away, covers 0.91; the
         re-acquisitions keep the slides along one axis, since the cell shifts along x covered 0.78 and
         0.81 beside right poses at 0.87 and 0.90 (under ``min_margin``: 2 of 13 frames ambiguous)."""
@@ -1056,9 +1056,11 @@ class PoseTracker:
 
     def update(self, frame: StereoFrame, T_guess: np.ndarray | None = None,
                observe: Callable[[], Segments] | None = None,
-               gradients: tuple[Gradients, Gradients] | None = None) -> PoseEstimate:
+               gradients: tuple[Gradients, Gradients] | None = None, rough_guess: bool = False) -> PoseEstimate:
         """Estimate the pose in ``frame``; ``T_guess`` (4, 4) T_camera_object overrides the prediction
-        (e.g. the first frame); ``observe()`` (the frame's extracted 3D segments, asked for only when
+        (e.g. the first frame); ``rough_guess``: it is a user's (``--init``), which may be off by one of
+        the model's symmetries (``_twins``; a recorded pose, which the model was built with, is not
+        checked so: the check costs 0.3 s); ``observe()`` (the frame's extracted 3D segments, asked for only when
         needed) enables re-acquisition by RANSAC; ``gradients``: the frame's (left, right)
         ``Gradients`` if already computed (pass the same to the extraction behind ``observe`` so that
         the frame's gradients are computed once).
@@ -1103,7 +1105,7 @@ class PoseTracker:
                     candidates.append(found)
         if T_guess is None:
             candidates += self._carried(candidates, frame, grads)
-        elif candidates:
+        elif candidates and rough_guess:
             candidates += self._twins(candidates[0], frame, grads, every_axis=True)
         if T_guess is not None and p.calibrate_limits and not self._calibrated:
             self._calibrated = True

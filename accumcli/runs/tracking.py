@@ -109,7 +109,8 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
                 shared = frame_gradients(frame, extract_params.lines)   # tracking and re-acquisition share them
                 observe = (lambda f=frame: extract_frame(f, extract_params, rec.camera_frame,
                                                          gradients=shared).segments) if reacquire else None
-                estimate = tracker.update(frame, guess, observe, gradients=shared)
+                estimate = tracker.update(frame, guess, observe, gradients=shared,
+                                          rough_guess=not times and init_pose is not None)
                 if len(times) == 0 and tracker.calibration_refused:
                     log.warning("%s: frame %d: %s; check that the model is of this object, and the starting pose "
                                 "(%s)", recording, frame.index, tracker.calibration_refused,
