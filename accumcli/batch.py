@@ -58,7 +58,7 @@ def _inputs_stamp(recording: Path, options: BatchOptions) -> dict:
 
 def _sidecar(recording: Path) -> Path:
     """NAME.truth.json beside the recording NAME.mcap (or the rosbag2 folder NAME)."""
-    return recording.with_name(recording.stem + ".truth.json")
+    return recording.with_name((recording.name if recording.is_dir() else recording.stem) + ".truth.json")
 
 
 OUTPUTS = ("done.json", "eval.json", "poses.json", "model.json", "model.ply")   # what a task may write

@@ -443,13 +443,17 @@ def track(model_file, recording, outputs, init_pose, rrd, reacquire, poses_topic
     from .runs import track_recording
 
     _check_formats(outputs, (".json", ".tum", ".mcap"))
-    given = click.get_current_context().get_parameter_source("object_frame") != ParameterSource.DEFAULT
     result = run_with_progress("tracking", track_recording, model_file, recording, outputs, init_pose=init_pose,
                                extract_params=extract_params, options=options, frames=frames,
                                reacquire=reacquire, rrd=rrd, poses_topic=poses_topic,
-                               poses_child_frame=poses_child_frame, object_frame_of_model=not given)
+                               poses_child_frame=poses_child_frame, object_frame_of_model=not _object_frame_given())
     _report(tracking_lines(result))
     _wrote(result.outputs)
+
+
+def _object_frame_given() -> bool:
+    """Whether the user gave --object-frame (else track and view take the frame the model names)."""
+    return click.get_current_context().get_parameter_source("object_frame") != ParameterSource.DEFAULT
 
 
 # -- view ------------------------------------------------------------------------------------------
@@ -482,9 +486,9 @@ def view(inputs, rrd, spawn, connect, png, png_frame, frames, options):
     """
     from .runs import view as run
 
-    given = click.get_current_context().get_parameter_source("object_frame") != ParameterSource.DEFAULT
     written = run_with_progress("logging", run, inputs, rrd=rrd, spawn=spawn, connect=connect, png=png,
-                                png_frame=png_frame, options=options, frames=frames, object_frame_of_model=not given)
+                                png_frame=png_frame, options=options, frames=frames,
+                                object_frame_of_model=not _object_frame_given())
     if written:
         _wrote(written)
 

@@ -71,7 +71,7 @@ def recording_options(func):
         click.option("--left-calibration-topic", default="/stereo/left/calibration", show_default=True),
         click.option("--right-calibration-topic", default="/stereo/right/calibration", show_default=True),
         click.option("--tf-topic", default="/tf", show_default=True),
-        click.option("--time-offset-ms", type=float, default=0.0, show_default=True,
+        click.option("--time-offset-ms", type=click.FloatRange(-1e12, 1e12), default=0.0, show_default=True,
                      help="Look the poses up this long after each image's stamp: where the camera's clock runs "
                           "ahead of the robot's, minus that (accumulate warns when the motion says the stamps are off)."),
         click.option("--tf-static-topic", default=None,

@@ -199,16 +199,14 @@ class MotionCheck:
         if self.offset_counts[best] == 0 or abs(OFFSETS_MS[best]) < WARN_OFFSET_MS:
             return None
         ratio = self.offset_counts[best] / max(self.offset_counts[_AT_ZERO], 1.0)
-        agree = sum((o > 0) == (OFFSETS_MS[best] > 0) for o in self.pair_offsets)
-        if ratio < MIN_PEAK_RATIO or not self.pair_offsets or binomtest(
-                agree, len(self.pair_offsets), alternative="greater").pvalue > MAX_SIGN_P:
+        if not _decided(ratio, self.pair_offsets, float(OFFSETS_MS[best])):
             return None
         offset = int(OFFSETS_MS[best])
         bound = "at least " if best in (0, len(OFFSETS_MS) - 1) else ""
         return (f"the images seem stamped {bound}{abs(offset)} ms {'before' if offset > 0 else 'after'} the moment "
                 f"they show (segments seen again match {ratio:.1f} times as often with the poses looked up "
                 f"{offset:+d} ms from each stamp), so few are confirmed; if the camera and the robot stamp with "
-                f"different clocks, try --time-offset-ms {current_ms + offset:g}")
+                f"different clocks, try --time-offset-ms {_milliseconds(current_ms + offset)}")
 
     def _count(self, tree, centers, directions, T_b, centers_a, directions_a, T_a, consecutive: bool) -> None:
         """Matches of frame a's segments in frame b (``tree`` of b's centres) for every scale (and, for
@@ -251,10 +249,7 @@ class MotionCheck:
         scale, ratio = float(SCALES[best]), float(self.counts[best] / max(self.counts[_AT_ONE], 1.0))
         if scale == 1.0:
             return scale, ratio
-        agree = sum((s > 1.0) == (scale > 1.0) for s in self.pair_scales)
-        if ratio < MIN_PEAK_RATIO or not self.pair_scales or binomtest(agree, len(self.pair_scales), alternative="greater").pvalue > MAX_SIGN_P:
-            return None
-        return scale, ratio
+        return (scale, ratio) if _decided(ratio, [s - 1.0 for s in self.pair_scales], scale - 1.0) else None
 
     def scale_warning(self) -> str | None:
         found = self.estimate()
@@ -284,3 +279,18 @@ def _best_offset(counts: np.ndarray) -> int:
     """Index of the most matches, the smallest offset among equals (a still object matches alike at any)."""
     top = np.flatnonzero(counts == counts.max())
     return int(top[np.argmin(np.abs(OFFSETS_MS[top]))])
+
+
+def _milliseconds(value: float) -> str:
+    """``value`` ms as an option's text: whole or to the microsecond, never in exponent form (``:g``
+    made 1234567 '1.23457e+06', 33 ms off)."""
+    return f"{value:.3f}".rstrip("0").rstrip(".")
+
+
+def _decided(ratio: float, pair_values: list, best: float) -> bool:
+    """Whether a peak away from the reference (``best``: its signed distance from it, ``ratio``: its
+    count over the reference's) is told: ``MIN_PEAK_RATIO`` and the frame pairs that tell on their own
+    (``pair_values``, signed the same way) agreeing on its side by a one-sided sign test at ``MAX_SIGN_P``."""
+    agree = sum((value > 0) == (best > 0) for value in pair_values)
+    return ratio >= MIN_PEAK_RATIO and bool(pair_values) and binomtest(
+        agree, len(pair_values), alternative="greater").pvalue <= MAX_SIGN_P

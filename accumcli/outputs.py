@@ -55,7 +55,9 @@ _FAULTS = {errno.ENOSPC: ("no space left on device writing {}", "free some space
            errno.EACCES: ("permission denied writing {}", "choose a folder you can write to"),
            errno.EPERM: ("operation not permitted writing {}", "choose a folder you can write to"),
            errno.EFBIG: ("file too large writing {}", "write to another file system"),
-           errno.EPIPE: ("the reader of {} closed it before the output was written", "keep it open to the end")}
+           errno.EPIPE: ("the reader of {} closed it before the output was written", "keep it open to the end"),
+           # a folder that exists but makes no file (/proc)
+           errno.ENOENT: ("no file can be made for {}", "choose a folder you can write to")}
 
 
 _NO_ROOM = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
@@ -458,9 +460,11 @@ def _check(out: _Output) -> _Output:
                          f"{limit} its folder allows; give a shorter name")
     try:
         fd, probe = tempfile.mkstemp(prefix=TEMP_PREFIX, suffix=TEMP_SUFFIX, dir=folder)
-    except OSError as e:   # whatever the reason (full, read-only, or /proc's "no such file"), one line
-        reason = os.strerror(e.errno) if e.errno else str(e)
-        raise AccumError(f"{given}: cannot create a file in {folder} ({reason}); "
+    except OSError as e:
+        fault = output_error(e, given)
+        if fault is None:
+            raise
+        raise AccumError(f"{given}: cannot create a file in {folder} ({os.strerror(e.errno)}); "
                          "choose a folder you can write to") from None
     os.close(fd)
     os.unlink(probe)

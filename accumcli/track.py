@@ -905,12 +905,15 @@ def slides(accepted: Segments, distinct_m: float, max_m: float = 0.04, step_m: f
     # per segment, how many lie within axis_deg of its line (either sign): a KD-tree on the unit
     # directions and their opposites, not the (N, N) matrix of every pair's cosine
     chord = 2 * np.sin(np.radians(axis_deg) / 2)
-    count = cKDTree(np.vstack([d, -d])).query_ball_point(d, chord, return_length=True)
     tree = cKDTree(accepted.centers)          # the model onto itself: one tree for every shift
     shifts = np.arange(distinct_m + step_m, max_m + 1e-9, step_m)
     out, left = [], np.ones(n, bool)
     for _ in range(max_axes):
-        members = left & (np.abs(d @ d[np.argmax(np.where(left, count, -1))]) >= np.cos(np.radians(axis_deg)))
+        rest = d[left]                        # the next axis among the segments no axis has taken
+        if not len(rest):
+            break
+        count = cKDTree(np.vstack([rest, -rest])).query_ball_point(rest, chord, return_length=True)
+        members = left & (np.abs(d @ rest[np.argmax(count)]) >= np.cos(np.radians(axis_deg)))
         if members.sum() < min_axis_share * n:
             break
         left &= ~members
@@ -1022,12 +1025,10 @@ class PoseTracker:
     def _twins(self, estimate: PoseEstimate, frame: StereoFrame, grads, every_axis: bool = False
                ) -> list[PoseEstimate]:
         """Refinements of ``estimate``'s pose moved by each of the model's ``symmetries`` (method
-        'symmetry': rivals in ``decide``, so the images must tell the poses apart). For a re-acquired
-        pose, and for a user's starting pose (``--init``, ``update``'s ``rough_guess``), there with slides
-        along ``every_axis``: on the chessboard an ``--init`` one square (25 mm) off along the board's x axis
-        verified there at a coverage of 0.70 while the right pose, one slide away, covers 0.91; the
-        re-acquisitions keep the slides along one axis, since the cell shifts along x covered 0.78 and
-        0.81 beside right poses at 0.87 and 0.90 (under ``min_margin``: 2 of 13 frames ambiguous)."""
+        'symmetry': rivals in ``decide``, so the images must tell the poses apart) of a re-acquired pose;
+        with slides along ``every_axis`` for a user's starting pose (``_climb_twins``). Re-acquisition
+        keeps the slides along one axis: the chessboard's cell shifts along x covered 0.78 and 0.81
+        beside right poses at 0.87 and 0.90 (under ``min_margin``: 2 of 13 frames ambiguous)."""
         p = self.params
         twins = []
         for S in self.symmetries(every_axis):
@@ -1036,6 +1037,24 @@ class PoseTracker:
             twin.method = "symmetry"
             twins.append(twin)
         return twins
+
+    def _climb_twins(self, given: PoseEstimate, frame: StereoFrame, grads, steps: int = 3,
+                     alike: float = 0.02) -> list[PoseEstimate]:
+        """The refinement of a user's starting pose (``given``) moved to its twin (``_twins``, slides
+        along every axis) while one covers more than ``alike`` more (up to ``steps`` times), first; then
+        the twins that cover about as much (within ``alike``): rivals in ``decide``. An ``--init`` one
+        chessboard square (25 mm) off verified there at a coverage of 0.70, the right pose one slide away
+        covers 0.91; two squares off takes two steps. Twins that cover less are no rivals: a square off
+        the right pose covers 0.08 less, and as rivals they made a right ``--init`` ambiguous on 8 of
+        the chessboard's 13 frames."""
+        best = given
+        for _ in range(steps + 1):
+            twins = self._twins(best, frame, grads, every_axis=True)
+            better = [t for t in twins if t.coverage > best.coverage + alike]
+            if not better or _ == steps:
+                break
+            best = max(better, key=_rank)
+        return [best] + [t for t in twins if t not in better and t.coverage >= best.coverage - alike]
 
     def _pin_unconfirmed(self, candidates: list[PoseEstimate], methods: tuple[str, ...], how: str) -> None:
         """Makes 'lost' the verified ``candidates`` found by ``methods`` that are not pinned to
@@ -1074,7 +1093,7 @@ class PoseTracker:
                gradients: tuple[Gradients, Gradients] | None = None, rough_guess: bool = False) -> PoseEstimate:
         """Estimate the pose in ``frame``; ``T_guess`` (4, 4) T_camera_object overrides the prediction
         (e.g. the first frame); ``rough_guess``: it is a user's (``--init``), which may be off by one of
-        the model's symmetries (``_twins``; a recorded pose, which the model was built with, is not
+        the model's symmetries (``_climb_twins``; a recorded pose, which the model was built with, is not
         checked so: the check costs 0.3 s); ``observe()`` (the frame's extracted 3D segments, asked for only when
         needed) enables re-acquisition by RANSAC; ``gradients``: the frame's (left, right)
         ``Gradients`` if already computed (pass the same to the extraction behind ``observe`` so that
@@ -1124,10 +1143,10 @@ class PoseTracker:
         if T_guess is None:
             candidates += self._carried(candidates, frame, grads)
         elif candidates and rough_guess:
-            candidates += self._twins(candidates[0], frame, grads, every_axis=True)
+            candidates = self._climb_twins(candidates[0], frame, grads) + candidates
         if T_guess is not None and p.calibrate_limits and not self._calibrated:
             self._calibrated = True
-            given = max(candidates, key=lambda c: c.coverage)   # the given pose's refinement, or a twin that fits better
+            given = candidates[0]
             if given.coverage >= p.min_coverage:   # the given pose fits the images: learn from it
                 self.params = p = calibrated(p, given)
                 candidates = [judge(c, p) for c in candidates]

@@ -23,6 +23,7 @@ size of the recording.
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import os
 import shutil
@@ -37,7 +38,8 @@ import numpy as np
 
 # rerun's own log lines (colours and all, naming our temporary file) would come beside accum's one-line
 # error when an .rrd cannot be written; accum reports every failure of the sink itself. RUST_LOG of
-# the user's shell still wins.
+# the user's shell still wins, and a spawned viewer gets the user's environment (``RerunLog``).
+_QUIETED = "RUST_LOG" not in os.environ
 os.environ.setdefault("RUST_LOG", "off")
 import rerun as rr  # noqa: E402  (after the setting above)
 import rerun.blueprint as rrb  # noqa: E402
@@ -135,6 +137,19 @@ def _rrd_problem(path: str, error: Exception) -> str:
     return f"Rerun could not write the recording in {folder} ({error}); check the disk, or leave out --rrd"
 
 
+@contextlib.contextmanager
+def _viewer_environment():
+    """The user's own environment while a viewer is started: its window, GPU or port errors must show."""
+    if not _QUIETED:
+        yield
+        return
+    os.environ.pop("RUST_LOG", None)
+    try:
+        yield
+    finally:
+        os.environ["RUST_LOG"] = "off"
+
+
 class RerunLog:
     """Logs accum's frames, segments and models to one Rerun recording."""
 
@@ -154,7 +169,8 @@ class RerunLog:
             self.rec.save(str(rrd))
         elif spawn:
             try:
-                rr.spawn(executable_path=executable, recording=self.rec)
+                with _viewer_environment():
+                    rr.spawn(executable_path=executable, recording=self.rec)
             except Exception as e:  # the viewer failed to start (rerun raises RuntimeError and others)
                 raise AccumError(f"cannot start the Rerun viewer ({type(e).__name__}: {e}); use --rrd") from None
         else:

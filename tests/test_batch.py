@@ -112,3 +112,10 @@ def test_the_truth_sidecar_of_a_rosbag2_folder_is_beside_it():
     assert _sidecar(Path("data/box.mcap")) == Path("data/box.truth.json")
     assert _sidecar(Path("data/box_bag")) == Path("data/box_bag.truth.json")
     assert _sidecar(Path("data/run.2.db3")) == Path("data/run.2.truth.json")
+
+
+def test_the_truth_sidecar_of_a_dotted_rosbag2_folder_keeps_its_whole_name(tmp_path):
+    from accumcli.batch import _sidecar
+
+    (tmp_path / "run.2").mkdir()
+    assert _sidecar(tmp_path / "run.2") == tmp_path / "run.2.truth.json"

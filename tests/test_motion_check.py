@@ -124,5 +124,9 @@ def test_images_stamped_apart_from_their_poses_are_named_with_the_offset_to_give
     assert late is not None and late.startswith("the images seem stamped 50 ms after the moment they show")
     assert late.endswith("try --time-offset-ms -50")
     assert warning(-30.0).endswith("try --time-offset-ms 30")
+    check = MotionCheck()   # a run given --time-offset-ms 12.5 already is told the whole offset
+    for segments, T, t_ns in _swinging(50.0):
+        check.add(segments, T, t_ns)
+    assert check.offset_warning(current_ms=12.5).endswith("try --time-offset-ms -37.5")
     assert warning(0.0) is None
     assert warning(50.0, swing=0.0) is None

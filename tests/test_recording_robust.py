@@ -349,6 +349,17 @@ def test_the_proposed_tolerance_pairs_cameras_whose_offset_varies(tmp_path):
         assert len(list(rec.frames())) == 12 and rec.info().unpaired_images == 0
 
 
+
+def test_a_dropped_partner_does_not_stretch_the_proposed_tolerance():
+    """At 30 frames/s with a tenth of the left images dropped, their right partners measure the 33 ms
+    to the next left image: the proposal stays at the cameras' own 3 to 5.5 ms (it proposed 30)."""
+    from accumcli.recording.reader import _Pairing
+
+    pairing = _Pairing("/left", 1_000_000, lambda *args: None)
+    pairing.offsets = [3_000_000 + (i % 6) * 500_000 for i in range(270)] + [28_000_000] * 30
+    assert pairing.covering_tolerance_ms == 6
+
+
 def test_unpaired_warnings_are_summarised(tmp_path, caplog):
     n = 12
     right = [T0 + i * PERIOD + (20_000_000 if i % 2 else 0) for i in range(n)]

@@ -350,6 +350,9 @@ def test_view_places_a_model_in_its_own_frame_and_frames_selects_a_frames_files_
     view([str(board / "chessboard.mcap"), str(tmp_path / "board.json")], rrd=str(rrd), object_frame_of_model=True,
          frames=FrameRange(0, 3))
     assert len(rrd_column(str(rrd), "world/model/board/accepted", "LineStrips3D:strips")) == 3
+    other = tmp_path / "other.png"   # a recording without the models' frame keeps its own (the box sample)
+    view([small_recording, str(tmp_path / "board.json")], png=str(other), object_frame_of_model=True)
+    assert other.stat().st_size > 1000
     frames_file = tmp_path / "frames.jsonl"
     extract_recording(small_recording, str(frames_file), frames=FrameRange(0, 4))
     rrd = tmp_path / "frames.rrd"

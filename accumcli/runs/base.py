@@ -134,8 +134,9 @@ def _grouped_by_time(reasons: dict[str, int]) -> dict[str, int]:
         text = key.format(span, found.group(2), found.group(3))
         gap = max(lo - max(times), min(times) - hi)
         if gap > 60:
+            shift_ms = (lo - min(times)) * 1000   # the first image at the first transform
             text += (f", {gap:.0f} s away: the images and the transforms seem to be stamped by different clocks; "
-                     "record both with one clock")
+                     f"record both with one clock, or if both began together try --time-offset-ms {shift_ms:.0f}")
         out[text] = n
     return out
 

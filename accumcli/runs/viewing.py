@@ -124,9 +124,8 @@ def view(paths, *, rrd=None, spawn: bool = False, connect: str | None = None, pn
         raise InputError(f"--png-frame {png_frame} lies outside --frames {frames}")
     inputs = ViewInputs.of(paths)
     named = {m.frame_id for m in inputs.models.values() if m.frame_id}
-    if object_frame_of_model and len(named) == 1 and options.object_frame not in named:
-        options = replace(options, object_frame=named.pop())
-        log.info("the object's frame is the model's: %s (--object-frame shows it in another)", options.object_frame)
+    if object_frame_of_model and inputs.recording and len(named) == 1 and options.object_frame not in named:
+        options = _models_frame(inputs.recording, options, named.pop())
     files = OutputSet([rrd, png], inputs=paths)
     with files:
         if rrd or spawn or connect:
@@ -134,6 +133,16 @@ def view(paths, *, rrd=None, spawn: bool = False, connect: str | None = None, pn
         if png:
             _draw_picture(inputs, files.open(png, "wb"), png_frame, options)
     return [str(p) for p in (rrd, png) if p]
+
+
+def _models_frame(recording, options: RecordingOptions, frame: str) -> RecordingOptions:
+    """``options`` with the object frame the models name, where the recording's tree has it (a model
+    of another object keeps ``options.object_frame``, and so the recording's poses)."""
+    with options.open(recording, require_pose=False) as rec:
+        if frame not in rec.tree.frames:
+            return options
+    log.info("the object's frame is the model's: %s (--object-frame shows it in another)", frame)
+    return replace(options, object_frame=frame)
 
 
 def _log_to_rerun(inputs: ViewInputs, rrd, spawn, connect, options, frames, progress) -> None:
@@ -174,7 +183,8 @@ def _log_to_rerun(inputs: ViewInputs, rrd, spawn, connect, options, frames, prog
     for path in inputs.frames_files:
         unplaced = 0
         for index, (t_ns, segments, doc) in enumerate(read_frames(path)):
-            if not frames.contains(doc.get("frame_index", index)):
+            number = doc.get("frame_index")
+            if not frames.contains(number if isinstance(number, int) and not isinstance(number, bool) else index):
                 continue
             T_world_camera = np.eye(4)
             if object_world:   # the line's pose places its segments beside the model
