@@ -57,7 +57,10 @@ _FAULTS = {errno.ENOSPC: ("no space left on device writing {}", "free some space
            errno.EFBIG: ("file too large writing {}", "write to another file system"),
            errno.EPIPE: ("the reader of {} closed it before the output was written", "keep it open to the end"),
            # a folder that exists but makes no file (/proc)
-           errno.ENOENT: ("no file can be made for {}", "choose a folder you can write to")}
+           errno.ENOENT: ("no file can be made for {}", "choose a folder you can write to"),
+           errno.EIO: ("input/output error writing {}", "check the disk or write elsewhere"),
+           errno.EMFILE: ("too many open files writing {}", "raise the limit (ulimit -n)"),
+           errno.ENFILE: ("too many open files in the system writing {}", "close some programs")}
 
 
 _NO_ROOM = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)

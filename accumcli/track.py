@@ -1054,7 +1054,7 @@ class PoseTracker:
             if not better or _ == steps:
                 break
             best = max(better, key=_rank)
-        return [best] + [t for t in twins if t not in better and t.coverage >= best.coverage - alike]
+        return [best] + [t for t in twins if t is not best and t.coverage >= best.coverage - alike]
 
     def _pin_unconfirmed(self, candidates: list[PoseEstimate], methods: tuple[str, ...], how: str) -> None:
         """Makes 'lost' the verified ``candidates`` found by ``methods`` that are not pinned to

@@ -769,6 +769,6 @@ def test_frames_without_a_pose_at_their_times_are_one_reason_with_a_word_on_the_
     assert ("36 frame(s): base_link -> tool0: time 1234.000 to 1237.500 s is outside the transform samples "
             "[1749999999.800, 1750000003.700] s, 1749998762 s away: the images and the transforms seem to be "
             "stamped by different clocks; record both with one clock, or if both began together try "
-            "--time-offset-ms 1749998765800") in message
+            "--time-offset-ms 1749998765801") in message
     near = {"a -> b: time 10.000 s is outside the transform samples [10.500, 20.000] s": 1}
     assert "clocks" not in str(nothing_done("bag", "nothing", near))

@@ -130,3 +130,11 @@ def test_images_stamped_apart_from_their_poses_are_named_with_the_offset_to_give
     assert check.offset_warning(current_ms=12.5).endswith("try --time-offset-ms -37.5")
     assert warning(0.0) is None
     assert warning(50.0, swing=0.0) is None
+
+
+def test_a_proposed_offset_is_written_out_whole():
+    """Never in exponent form (``:g`` wrote 1234567 as 1.23457e+06, 33 ms off)."""
+    from accumcli.motion_check import _milliseconds
+
+    assert [_milliseconds(v) for v in (1234567.0, -50.0, 12.5, 1749998765801.0)] == \
+        ["1234567", "-50", "12.5", "1749998765801"]

@@ -357,7 +357,10 @@ def test_a_dropped_partner_does_not_stretch_the_proposed_tolerance():
 
     pairing = _Pairing("/left", 1_000_000, lambda *args: None)
     pairing.offsets = [3_000_000 + (i % 6) * 500_000 for i in range(270)] + [28_000_000] * 30
+    pairing.left_gaps = [33_333_333] * 100
     assert pairing.covering_tolerance_ms == 6
+    pairing.offsets = [0] * 60 + [3_000_000] * 40   # synchronised cameras and a jitter of 3 ms: 4, not 1
+    assert pairing.covering_tolerance_ms == 4
 
 
 def test_unpaired_warnings_are_summarised(tmp_path, caplog):

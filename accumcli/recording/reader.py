@@ -192,6 +192,8 @@ class _Pairing:
         self.pending = {True: deque(), False: deque()}
         self.recent = {True: deque(maxlen=8), False: deque(maxlen=8)}
         self.offsets: list[int] = []
+        self.left_gaps: list[int] = []    # between consecutive left stamps: the frame period
+        self._last_left: int | None = None
 
     def _offset(self, is_left: bool, t_ns: int) -> None:
         others = self.recent[not is_left]
@@ -201,6 +203,10 @@ class _Pairing:
     def add(self, topic: str, item: _PendingImage) -> list[tuple[_PendingImage, _PendingImage]]:
         is_left = topic == self.left_topic
         self.recent[is_left].append(item.t_ns)
+        if is_left:
+            if self._last_left is not None and item.t_ns > self._last_left and len(self.left_gaps) < OFFSET_SAMPLES:
+                self.left_gaps.append(item.t_ns - self._last_left)
+            self._last_left = item.t_ns
         partners = self.pending[not is_left]
         while partners and partners[0].t_ns < item.t_ns - self.tolerance_ns:
             self._give_up(not is_left, partners.popleft())
@@ -232,16 +238,19 @@ class _Pairing:
 
     @property
     def covering_tolerance_ms(self) -> int | None:
-        """Whole milliseconds above the 98th percentile of the offsets up to 3 times their median and
-        1 ms: the ``--tolerance-ms`` to propose. The median proposed 5 ms for cameras 3 to 5.5 ms
-        apart, which left a quarter of the images unpaired; beyond, an image whose partner was dropped
-        measures its distance to the next frame's, which proposed a whole frame period (30 fps, a tenth
-        of the left images dropped: 30 ms, pairing 62 of 268 images with the next frame's)."""
+        """Whole milliseconds above the 98th percentile of the offsets under half the frame period (the
+        median gap between left stamps): the ``--tolerance-ms`` to propose. The median proposed 5 ms
+        for cameras 3 to 5.5 ms apart, which left a quarter of the images unpaired; an image whose
+        partner was dropped measures its distance to the next frame's, which proposed a whole frame
+        period (30 fps, a tenth of the left images dropped: 30 ms, pairing 62 of 268 images with the
+        next frame's)."""
         if not self.offsets:
             return None
         offsets = np.asarray(self.offsets, float)
-        usual = offsets[offsets <= 3 * np.median(offsets) + 1e6]
-        return math.floor(float(np.percentile(usual, 98)) * 1e-6) + 1
+        if self.left_gaps:
+            within = offsets[offsets < float(np.median(self.left_gaps)) / 2]
+            offsets = within if len(within) else offsets
+        return math.floor(float(np.percentile(offsets, 98)) * 1e-6) + 1
 
 
 class Recording:

@@ -10,6 +10,7 @@ call the same functions.
 from __future__ import annotations
 
 import logging
+import math
 import os
 import re
 from dataclasses import dataclass, field
@@ -104,18 +105,21 @@ def nothing_done(path, what: str, skipped: dict[str, int] | None = None, rec=Non
     """The error for a run that would produce nothing: which frames were skipped, and why (``skipped``,
     and the frames the recording ``rec`` could not decode, first: they never reach a run)."""
     reasons = {**(getattr(rec, "undecodable", None) or {}), **(skipped or {})}
-    listed = "; ".join(f"{n} frame(s): {why}" for why, n in _grouped_by_time(reasons).items())
+    current_ms = getattr(rec, "time_offset_ns", 0) * 1e-6
+    listed = "; ".join(f"{n} frame(s): {why}" for why, n in _grouped_by_time(reasons, current_ms).items())
     return AccumError(f"{path}: {what}" + (f" ({listed})" if listed else ""))
 
 
 _FRAME_TIME = re.compile(r"time (-?\d+(?:\.\d+)?) s is outside the transform samples \[(-?[\d.]+), (-?[\d.]+)\] s")
 
 
-def _grouped_by_time(reasons: dict[str, int]) -> dict[str, int]:
+def _grouped_by_time(reasons: dict[str, int], current_ms: float = 0.0) -> dict[str, int]:
     """``reasons`` (why -> frames) with the reasons that differ only in the frame's time (a pose outside
     the transforms' time range) as one, naming the range of times; where those times lie more than a
     minute from the transforms', a remark on the clocks (36 such reasons made one line of 4,350
-    characters: the camera's clock counted from its boot, the transforms' from 1970)."""
+    characters: the camera's clock counted from its boot, the transforms' from 1970) with the
+    ``--time-offset-ms`` that puts the first image 1 ms after the first transform (the times are
+    lookups: the stamps plus ``current_ms``, the run's own offset)."""
     grouped: dict[str, list] = {}
     for why, n in reasons.items():
         found = _FRAME_TIME.search(why)
@@ -134,7 +138,7 @@ def _grouped_by_time(reasons: dict[str, int]) -> dict[str, int]:
         text = key.format(span, found.group(2), found.group(3))
         gap = max(lo - max(times), min(times) - hi)
         if gap > 60:
-            shift_ms = (lo - min(times)) * 1000   # the first image at the first transform
+            shift_ms = current_ms + math.ceil((lo - min(times)) * 1000) + 1
             text += (f", {gap:.0f} s away: the images and the transforms seem to be stamped by different clocks; "
                      f"record both with one clock, or if both began together try --time-offset-ms {shift_ms:.0f}")
         out[text] = n
