@@ -137,10 +137,16 @@ def view(paths, *, rrd=None, spawn: bool = False, connect: str | None = None, pn
 
 def _models_frame(recording, options: RecordingOptions, frame: str) -> RecordingOptions:
     """``options`` with the object frame the models name, where the recording's tree has it (a model
-    of another object keeps ``options.object_frame``, and so the recording's poses)."""
-    with options.open(recording, require_pose=False) as rec:
-        if frame not in rec.tree.frames:
-            return options
+    of another object keeps ``options.object_frame``, and so the recording's poses). This look is
+    silent: the recording's own warnings come once, from the opening that shows it."""
+    quiet = logging.getLogger("accumcli")
+    was, quiet.disabled = quiet.disabled, True
+    try:
+        with options.open(recording, require_pose=False) as rec:
+            if frame not in rec.tree.frames:
+                return options
+    finally:
+        quiet.disabled = was
     log.info("the object's frame is the model's: %s (--object-frame shows it in another)", frame)
     return replace(options, object_frame=frame)
 
