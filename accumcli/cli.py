@@ -431,7 +431,8 @@ def track(model_file, recording, outputs, init_pose, rrd, reacquire, poses_topic
           extract_params, options):
     """Estimate the object's pose in every frame from its model and the images.
 
-    The recording's pose seeds the first frame only (or --init gives it);
+    The recording's pose seeds the first frame only (or --init gives it;
+    frames before the first recorded pose are lost, tracking starts there);
     after that, poses come from the images alone. The object's frame is
     the one the model names unless --object-frame is given.
 

@@ -478,3 +478,28 @@ def test_a_repeated_image_stamp_is_skipped_with_a_warning(tmp_path, caplog):
         frames = list(rec.frames())
     assert [f.timestamp_ns for f in frames] == [T0, T0 + 100_000_000, T0 + 200_000_000]
     assert "has the stamp of the frame before it" in caplog.text and "skipped" in caplog.text
+
+
+def test_tracking_starts_at_the_first_frame_with_a_recorded_pose(tmp_path):
+    """Transforms that begin after the images (tf started late): the frames before them are 'lost' with
+    the reason and tracking starts at the first with a pose (it refused the run, asking for --init);
+    with no pose anywhere the run is refused in one line."""
+    from accumcli.errors import AccumError
+    from accumcli.model_io import read_poses, write_model
+    from accumcli.runs import track_recording
+    from accumcli.segments import Segments
+
+    model = tmp_path / "m.json"
+    write_model(model, Segments("gripper", np.array([[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [0.0, 0.01, 0.0]]),
+                                np.eye(3), np.full(3, 0.01), np.ones(3), np.full(3, 3, np.int64)))
+    late = fuzz.build(tmp_path / "late.mcap", n=5,
+                      tf=[("camera_left", "gripper", T0 + i * PERIOD, (0, 0, 0.5), (0, 0, 0, 1)) for i in (2, 3, 4)])
+    track_recording(str(model), str(late), [str(tmp_path / "p.json")], reacquire=False)
+    poses = read_poses(str(tmp_path / "p.json"))
+    assert len(poses.status) == 5 and list(poses.status[:2]) == ["lost", "lost"]
+    reasons = [row.get("reason", "") for row in poses.extra[:2]]
+    assert all(r.startswith("no recorded pose to start from") for r in reasons), reasons
+    none = fuzz.build(tmp_path / "none.mcap", n=3, tf=[("camera_left", "gripper", T0 + i * PERIOD, (0, 0, 0.5),
+                                                         (0, 0, 0, 1)) for i in (10, 11)])   # after every frame
+    with pytest.raises(AccumError, match="no frame has a recorded pose to start from .*; give one with --init"):
+        track_recording(str(model), str(none), [str(tmp_path / "q.json")], reacquire=False)

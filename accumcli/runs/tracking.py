@@ -16,7 +16,7 @@ from ..lines2d import frame_gradients
 from ..model_io import PoseTrack, read_model, write_poses, write_poses_mcap
 from ..outputs import OutputSet
 from ..segments import Segments
-from ..track import PoseTracker, TrackParams
+from ..track import PoseEstimate, PoseTracker, TrackParams
 from ..tum import write_poses_tum
 from .base import FrameRange, Progress, RecordingOptions, frame_range, in_frames, no_progress, nothing_done, path_list
 from .frame_logs import rerun_log
@@ -98,20 +98,26 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
             log.warning("%s: the model is in frame %r, tracked as the recording's %r (--object-frame): the same "
                         "object under another name, or a wrong model (then nothing is tracked)", model_path,
                         model.frame_id, rec.object_frame)
+        waited, first_problem = [], None   # frames before the first with a starting pose (none recorded yet)
         with rerun_log(files, rrd, "track") as viz:
             for frame in rec.frames(frames.start, frames.stop):
-                guess = None
-                if not times:
-                    guess = init_pose if init_pose is not None else frame.T_camera_object
-                    if guess is None:
-                        raise AccumError(f"{recording}: the first frame has no recorded pose "
-                                         f"({frame.pose_problem}); give one with --init")
-                shared = frame_gradients(frame, extract_params.lines)   # tracking and re-acquisition share them
-                observe = (lambda f=frame: extract_frame(f, extract_params, rec.camera_frame,
-                                                         gradients=shared).segments) if reacquire else None
-                estimate = tracker.update(frame, guess, observe, gradients=shared,
-                                          rough_guess=not times and init_pose is not None)
-                if len(times) == 0 and tracker.calibration_refused:
+                guess, starting = None, len(times) == len(waited)
+                if starting:
+                    guess = init_pose if init_pose is not None and not times else frame.T_camera_object
+                if starting and guess is None:   # the transforms begin after the images: start where they do
+                    first_problem = first_problem or frame.pose_problem
+                    waited.append(frame.index)
+                    estimate = PoseEstimate(np.full((4, 4), np.nan), float("inf"), 0, 0, "lost",
+                                            reason=f"no recorded pose to start from ({frame.pose_problem})")
+                else:
+                    shared = frame_gradients(frame, extract_params.lines)   # tracking and re-acquisition share them
+                    observe = (lambda f=frame: extract_frame(f, extract_params, rec.camera_frame,
+                                                             gradients=shared).segments) if reacquire else None
+                    estimate = tracker.update(frame, guess, observe, gradients=shared,
+                                              rough_guess=not times and init_pose is not None)
+                if starting and guess is not None:
+                    start_index = frame.index
+                if starting and guess is not None and tracker.calibration_refused:
                     log.warning("%s: frame %d: %s; check that the model is of this object, and the starting pose "
                                 "(%s)", recording, frame.index, tracker.calibration_refused,
                                 "--init" if init_pose is not None else "the recorded one, or give --init")
@@ -129,6 +135,13 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
                 progress(len(times), total)
         if not times:
             raise nothing_done(recording, f"no stereo frame could be read{in_frames(frames)}", rec=rec)
+        if len(waited) == len(times):
+            raise AccumError(f"{recording}: no frame{in_frames(frames)} has a recorded pose to start from "
+                             f"({first_problem}); give one with --init")
+        if waited:
+            log.warning("%s: frames %d to %d have no recorded pose (%s): tracking starts at frame %d, the "
+                        "first with one (--init gives the first frame a pose)", recording, waited[0], waited[-1],
+                        first_problem, start_index)
         track = PoseTrack(rec.camera_frame, rec.object_frame, np.array(times, np.int64),
                           np.array(poses).reshape(-1, 4, 4), status, extra)
         for path in outputs:
