@@ -59,29 +59,24 @@ lines_option = click.option("--frames", "frames", default="0:", callback=library
 
 
 class _FiniteMilliseconds(click.ParamType):
-    """A finite number of milliseconds within +-1e13 (300 years: a camera counting from its boot against
-    transforms counting from 1970 is 1.75e12 ms), so that its nanoseconds fit an int64: click's
-    FloatRange lets NaN through (every comparison with it is false), which ended in a traceback."""
+    """A finite number of milliseconds from ``minimum`` to 1e13 (300 years: a camera counting from its
+    boot against transforms counting from 1970 is 1.75e12 ms), so that its nanoseconds fit an int64:
+    click's FloatRange lets NaN through (every comparison with it is false), which ended in a traceback."""
 
     name = "float"
+
+    def __init__(self, minimum: float = -1e13):
+        self.minimum = minimum
 
     def convert(self, value, param, ctx):
         try:
             number = float(value)
         except (TypeError, ValueError):
             self.fail(f"{value!r} is not a number", param, ctx)
-        if not math.isfinite(number) or abs(number) > 1e13:
-            self.fail(f"{value!r}: expected a finite number of milliseconds within +-1e13", param, ctx)
+        if not (math.isfinite(number) and self.minimum <= number <= 1e13):
+            low = "-1e13" if self.minimum == -1e13 else f"{self.minimum:g}"
+            self.fail(f"{value!r}: expected a finite number of milliseconds from {low} to 1e13", param, ctx)
         return number
-
-
-FINITE_MS = _FiniteMilliseconds()
-
-
-def _not_negative(ctx, param, value):
-    if value < 0:
-        raise click.BadParameter(f"{value:g}: expected 0 or more milliseconds")
-    return value
 
 
 def recording_options(func):
@@ -91,14 +86,14 @@ def recording_options(func):
                      help="Frame of the object (the gripper) in the transform tree."),
         click.option("--camera-frame", default="camera_left", show_default=True,
                      help="Rectified left camera optical frame."),
-        click.option("--tolerance-ms", type=FINITE_MS, default=1.0, show_default=True, callback=_not_negative,
+        click.option("--tolerance-ms", type=_FiniteMilliseconds(0.0), default=1.0, show_default=True,
                      help="Left/right pairing and transform time tolerance."),
         click.option("--left-topic", default="/stereo/left/image", show_default=True),
         click.option("--right-topic", default="/stereo/right/image", show_default=True),
         click.option("--left-calibration-topic", default="/stereo/left/calibration", show_default=True),
         click.option("--right-calibration-topic", default="/stereo/right/calibration", show_default=True),
         click.option("--tf-topic", default="/tf", show_default=True),
-        click.option("--time-offset-ms", type=FINITE_MS, default=0.0, show_default=True,
+        click.option("--time-offset-ms", type=_FiniteMilliseconds(), default=0.0, show_default=True,
                      help="Look the poses up this long after each image's stamp: where the camera's clock runs "
                           "ahead of the robot's, minus that (accumulate warns when the motion says the stamps are off)."),
         click.option("--tf-static-topic", default=None,

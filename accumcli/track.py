@@ -1061,13 +1061,15 @@ class PoseTracker:
         ``reacquire_std_ratio`` of the limits on the standard deviations and do not cover
         ``reacquire_min_coverage``: no motion corroborates a pose that RANSAC, a twin, the wide search or
         a restart found."""
+        found = [c for c in candidates if c.method in methods and c.status == "tracked"]
+        if not found:
+            return
         p = self.params
         strict = replace(p, max_std_deg=p.max_std_deg * p.reacquire_std_ratio,
                          max_std_mm=p.max_std_mm * p.reacquire_std_ratio,
                          min_coverage=max(p.min_coverage, p.reacquire_min_coverage))
-        for c in candidates:
-            loose = c.method in methods and c.status == "tracked" and (
-                _determination_failures(c, strict) + _image_failures(c, strict))
+        for c in found:
+            loose = _determination_failures(c, strict) + _image_failures(c, strict)
             if loose:
                 c.status, c.reason = "lost", f"{how}: {loose[0]}"
 
@@ -1146,9 +1148,8 @@ class PoseTracker:
             candidates = self._climb_twins(candidates[0], frame, grads) + candidates
         if T_guess is not None and p.calibrate_limits and not self._calibrated:
             self._calibrated = True
-            given = candidates[0]
-            if given.coverage >= p.min_coverage:   # the given pose fits the images: learn from it
-                self.params = p = calibrated(p, given)
+            if candidates[0].coverage >= p.min_coverage:   # the given pose fits the images: learn from it
+                self.params = p = calibrated(p, candidates[0])
                 candidates = [judge(c, p) for c in candidates]
             else:   # a wrong start must not loosen the limits: they wait for the first verified frame
                 self.calibration_refused = (f"the starting pose of the first frame does not fit its images "

@@ -27,6 +27,7 @@ Defined behaviour for odd input:
 
 from __future__ import annotations
 
+import re
 from collections import defaultdict, deque
 from dataclasses import dataclass, field
 
@@ -36,6 +37,10 @@ from ..errors import PoseUnavailable
 from ..geometry import interpolate, invert, transform_from_quat
 
 MAX_TRANSLATION_M = 1e4
+# a frame's time outside an edge's samples: the message, and its pattern for grouping such reasons by time
+OUTSIDE_SAMPLES = "time {:.3f} s is outside the transform samples [{:.3f}, {:.3f}] s"
+OUTSIDE_SAMPLES_PATTERN = re.compile(r"time (-?\d+(?:\.\d+)?) s is outside the transform samples "
+                                     r"\[(-?[\d.]+), (-?[\d.]+)\] s")
 GAP_FACTOR = 4.0           # samples further apart than this many median spacings: a gap, not interpolated
 MIN_GAP_NS = 100_000_000   # ... and at least this far apart (a slow /tf of a slow robot is no gap)
 
@@ -113,9 +118,8 @@ class TransformSamples:
         t = self.times_ns
         t_ns = int(t_ns)
         if t_ns < int(t[0]) - tolerance_ns or t_ns > int(t[-1]) + tolerance_ns:
-            raise PoseUnavailable(
-                f"{self.parent} -> {self.child}: time {t_ns * 1e-9:.3f} s is outside the transform samples "
-                f"[{t[0] * 1e-9:.3f}, {t[-1] * 1e-9:.3f}] s")
+            raise PoseUnavailable(f"{self.parent} -> {self.child}: "
+                                  + OUTSIDE_SAMPLES.format(t_ns * 1e-9, t[0] * 1e-9, t[-1] * 1e-9))
         hi = int(np.searchsorted(t, t_ns, side="left"))
         if hi < len(t) and t[hi] == t_ns:
             lo = hi

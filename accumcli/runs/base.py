@@ -18,6 +18,7 @@ from typing import Callable
 
 from ..errors import AccumError, InputError
 from ..recording import Recording, Topics
+from ..recording.tf_tree import OUTSIDE_SAMPLES, OUTSIDE_SAMPLES_PATTERN
 
 log = logging.getLogger("accumcli")
 
@@ -110,9 +111,6 @@ def nothing_done(path, what: str, skipped: dict[str, int] | None = None, rec=Non
     return AccumError(f"{path}: {what}" + (f" ({listed})" if listed else ""))
 
 
-_FRAME_TIME = re.compile(r"time (-?\d+(?:\.\d+)?) s is outside the transform samples \[(-?[\d.]+), (-?[\d.]+)\] s")
-
-
 def _grouped_by_time(reasons: dict[str, int], current_ms: float = 0.0) -> dict[str, int]:
     """``reasons`` (why -> frames) with the reasons that differ only in the frame's time (a pose outside
     the transforms' time range) as one, naming the range of times; where those times lie more than a
@@ -122,8 +120,8 @@ def _grouped_by_time(reasons: dict[str, int], current_ms: float = 0.0) -> dict[s
     lookups: the stamps plus ``current_ms``, the run's own offset)."""
     grouped: dict[str, list] = {}
     for why, n in reasons.items():
-        found = _FRAME_TIME.search(why)
-        key = why if found is None else _FRAME_TIME.sub("time {} s is outside the transform samples [{}, {}] s", why)
+        found = OUTSIDE_SAMPLES_PATTERN.search(why)
+        key = why if found is None else OUTSIDE_SAMPLES_PATTERN.sub("\0", why)   # the times' place
         entry = grouped.setdefault(key, [0, [], found])
         entry[0] += n
         if found is not None:
@@ -134,8 +132,9 @@ def _grouped_by_time(reasons: dict[str, int], current_ms: float = 0.0) -> dict[s
             out[key] = n
             continue
         lo, hi = float(found.group(2)), float(found.group(3))
-        span = f"{min(times):.3f}" if min(times) == max(times) else f"{min(times):.3f} to {max(times):.3f}"
-        text = key.format(span, found.group(2), found.group(3))
+        text = key.replace("\0", OUTSIDE_SAMPLES.format(min(times), lo, hi))
+        if min(times) != max(times):
+            text = text.replace(f"{min(times):.3f} s", f"{min(times):.3f} to {max(times):.3f} s", 1)
         gap = max(lo - max(times), min(times) - hi)
         if gap > 60:
             shift_ms = current_ms + math.ceil((lo - min(times)) * 1000) + 1

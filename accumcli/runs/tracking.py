@@ -98,15 +98,14 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
             log.warning("%s: the model is in frame %r, tracked as the recording's %r (--object-frame): the same "
                         "object under another name, or a wrong model (then nothing is tracked)", model_path,
                         model.frame_id, rec.object_frame)
-        waited, first_problem = [], None   # frames before the first with a starting pose (none recorded yet)
+        waited, start_index = [], None   # the frames before the first with a starting pose, and that one's
         with rerun_log(files, rrd, "track") as viz:
             for frame in rec.frames(frames.start, frames.stop):
-                guess, starting = None, len(times) == len(waited)
-                if starting:
+                guess = None
+                if start_index is None:
                     guess = init_pose if init_pose is not None and not times else frame.T_camera_object
-                if starting and guess is None:   # the transforms begin after the images: start where they do
-                    first_problem = first_problem or frame.pose_problem
-                    waited.append(frame.index)
+                if start_index is None and guess is None:   # the transforms begin after the images: wait for them
+                    waited.append((frame.index, frame.pose_problem))
                     estimate = PoseEstimate(np.full((4, 4), np.nan), float("inf"), 0, 0, "lost",
                                             reason=f"no recorded pose to start from ({frame.pose_problem})")
                 else:
@@ -115,12 +114,12 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
                                                              gradients=shared).segments) if reacquire else None
                     estimate = tracker.update(frame, guess, observe, gradients=shared,
                                               rough_guess=not times and init_pose is not None)
-                if starting and guess is not None:
+                if guess is not None and start_index is None:
                     start_index = frame.index
-                if starting and guess is not None and tracker.calibration_refused:
-                    log.warning("%s: frame %d: %s; check that the model is of this object, and the starting pose "
-                                "(%s)", recording, frame.index, tracker.calibration_refused,
-                                "--init" if init_pose is not None else "the recorded one, or give --init")
+                    if tracker.calibration_refused:
+                        log.warning("%s: frame %d: %s; check that the model is of this object, and the starting "
+                                    "pose (%s)", recording, frame.index, tracker.calibration_refused,
+                                    "--init" if init_pose is not None else "the recorded one, or give --init")
                 times.append(frame.timestamp_ns)
                 poses.append(estimate.T_camera_object)
                 status.append(estimate.status)
@@ -135,13 +134,13 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
                 progress(len(times), total)
         if not times:
             raise nothing_done(recording, f"no stereo frame could be read{in_frames(frames)}", rec=rec)
-        if len(waited) == len(times):
+        if start_index is None:
             raise AccumError(f"{recording}: no frame{in_frames(frames)} has a recorded pose to start from "
-                             f"({first_problem}); give one with --init")
+                             f"({waited[0][1]}); give one with --init")
         if waited:
             log.warning("%s: frames %d to %d have no recorded pose (%s): tracking starts at frame %d, the "
-                        "first with one (--init gives the first frame a pose)", recording, waited[0], waited[-1],
-                        first_problem, start_index)
+                        "first with one (--init gives the first frame a pose)", recording, waited[0][0],
+                        waited[-1][0], waited[0][1], start_index)
         track = PoseTrack(rec.camera_frame, rec.object_frame, np.array(times, np.int64),
                           np.array(poses).reshape(-1, 4, 4), status, extra)
         for path in outputs:
