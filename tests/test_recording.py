@@ -13,7 +13,7 @@ from accumcli.geometry import make_transform, transform_from_quat, transform_poi
 from accumcli.model_io import read_truth
 from accumcli.recording import Recording, RecordingWriter, TransformTree
 from accumcli.recording.calibration import CameraCalibration, check_calibration
-from accumcli.recording.messages import decode_image, image_to_msg
+from accumcli.recording.messages import RAW_ENCODINGS, decode_image, image_to_msg
 from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 
@@ -240,6 +240,75 @@ def test_image_decoding(encoding):
     assert decoded.shape == grey.shape and decoded.dtype == np.uint8
     tolerance = 30 if encoding == "jpeg" else 1
     assert np.abs(decoded.astype(int) - grey).mean() < tolerance
+
+
+def _colour_image() -> np.ndarray:
+    """(40, 60, 3) uint8 BGR, smooth and strongly coloured: red and blue swapped change its grey by 20 levels."""
+    y, x = np.mgrid[0:40, 0:60]
+    return np.dstack([10 + x // 4, 50 + y, 200 - x]).astype(np.uint8)
+
+
+def _packed(bgr: np.ndarray, encoding: str) -> np.ndarray:
+    """``bgr`` laid out as a raw image of ``encoding``: (H, W, channels) or (H, W)."""
+    rgb = bgr[:, :, ::-1]
+    if encoding.startswith("bayer_"):   # ROS's name: the first row's two filters, then the second row's
+        mosaic = np.zeros(bgr.shape[:2], np.uint8)
+        for k, colour in enumerate(encoding[6:10]):
+            dy, dx = divmod(k, 2)
+            mosaic[dy::2, dx::2] = rgb[dy::2, dx::2, "rgb".index(colour)]
+        return mosaic if encoding.endswith("8") else mosaic.astype("<u2") * 257
+    if encoding in ("uyvy", "yuv422", "yuyv", "yuv422_yuy2"):
+        yuv = cv2.cvtColor(bgr, cv2.COLOR_BGR2YUV).astype(int)
+        u = (yuv[:, 0::2, 1] + yuv[:, 1::2, 1]) // 2
+        v = (yuv[:, 0::2, 2] + yuv[:, 1::2, 2]) // 2
+        y0, y1 = yuv[:, 0::2, 0], yuv[:, 1::2, 0]
+        pairs = [u, y0, v, y1] if encoding in ("uyvy", "yuv422") else [y0, u, y1, v]
+        return np.stack(pairs, axis=2).reshape(bgr.shape[0], bgr.shape[1], 2).astype(np.uint8)
+    order = {"rgb": rgb, "bgr": bgr, "8UC": bgr}[encoding[:3]]
+    if "a" in encoding[3:] or encoding == "8UC4":
+        order = np.dstack([order, np.full(bgr.shape[:2], 255, np.uint8)])
+    return order.astype("<u2") * 257 if encoding.endswith("16") else order
+
+
+@pytest.mark.parametrize("encoding", [e for e in RAW_ENCODINGS if not e.startswith(("mono", "8UC1", "16UC1"))])
+def test_colour_bayer_and_yuv_images_become_their_grey(encoding):
+    """Every raw encoding read gives the grey OpenCV gives the colour image (within a grey level, 2 px
+    inside for Bayer, demosaiced): a Bayer pattern read with its red and blue swapped is 20 levels off."""
+    bgr = _colour_image()
+    grey = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(int)
+    data = _packed(bgr, encoding)
+    msg = RawImage(width=bgr.shape[1], height=bgr.shape[0], encoding=encoding, step=data.strides[0],
+                   data=data.tobytes())
+    error = np.abs(decode_image(msg).astype(int) - grey)
+    assert error[2:-2, 2:-2].max() <= 1
+    if encoding.startswith("bayer_"):
+        msg.encoding = "bayer_" + encoding[6:].translate(str.maketrans("rb", "br"))
+        assert np.abs(decode_image(msg).astype(int) - grey)[2:-2, 2:-2].max() > 10
+
+
+def test_a_compressed_bayer_mosaic_is_demosaiced():
+    """ROS's compressed transport keeps a Bayer mosaic as a one-channel PNG, its format naming the pattern."""
+    bgr = _colour_image()
+    grey = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(int)
+    png = cv2.imencode(".png", _packed(bgr, "bayer_gbrg8"))[1].tobytes()
+    msg = CompressedImage(format="bayer_gbrg8; png compressed ", data=png)
+    assert np.abs(decode_image(msg).astype(int) - grey)[2:-2, 2:-2].max() <= 1
+    msg.format = "png"   # read as grey, the mosaic's filters are a grid of edges
+    assert np.abs(decode_image(msg).astype(int) - grey)[2:-2, 2:-2].max() > 50
+
+
+@pytest.mark.parametrize("encoding, said", [("32FC1", "floating-point values"), ("nv12", "is not supported")])
+def test_unreadable_encodings_are_refused_when_the_recording_opens(tmp_path, encoding, said):
+    path = tmp_path / "r.mcap"
+    with RecordingWriter(path) as w:
+        for side in ("left", "right"):
+            w.calibration(f"/stereo/{side}/calibration", helpers.calibration(side), helpers.T0)
+            msg = image_to_msg(helpers.image(0), helpers.T0, f"camera_{side}", "mono8")
+            msg.encoding = encoding
+            w.message(f"/stereo/{side}/image", msg, helpers.T0)
+        w.raw_transform("camera_left", "gripper", (0.0, 0.0, 0.5), (0, 0, 0, 1), helpers.T0)
+    with pytest.raises(RecordingError, match=f"/stereo/left/image: image encoding '{encoding}' .*{said}"):
+        Recording(path)
 
 
 @pytest.mark.parametrize("bits, full_scale", [(10, 1023), (12, 4095), (16, 65535)])

@@ -127,9 +127,10 @@ def test_protobuf_recording_gets_no_ros_proposal(tmp_path):
     assert "missing topic /stereo/left/image (topics found" in str(e.value) and "ROS 2" not in str(e.value)
 
 
-def _write_raw_ros(writer, encoding: str, n=3, tf_topic="/tf"):
+def _write_raw_ros(writer, encoding: str, n=3, tf_topic="/tf", pixels=helpers.image):
     """A tiny ROS 2 recording whose images are sensor_msgs/msg/Image in ``encoding`` (written as mono8
-    content under that name) and with one transform per frame on ``tf_topic`` (one only on /tf_static)."""
+    content, ``pixels(i)``, under that name) and with one transform per frame on ``tf_topic`` (one only on
+    /tf_static)."""
     from accumcli.recording.messages import image_to_msg
     from accumcli.recording.ros2 import ros_from_foxglove
 
@@ -140,19 +141,33 @@ def _write_raw_ros(writer, encoding: str, n=3, tf_topic="/tf"):
         if tf_topic == "/tf" or i == 0:
             writer.raw_transform("camera_left", "gripper", (0.01 * i, 0.0, 0.5), (0, 0, 0, 1), t, topic=tf_topic)
         for side in ("left", "right"):
-            msg = image_to_msg(helpers.image(i), t, f"camera_{side}", "mono8")
+            msg = image_to_msg(pixels(i), t, f"camera_{side}", "mono8")
             msg.encoding = encoding
             writer.ros_message(f"/stereo/{side}/image", ros_from_foxglove(msg), t)
 
 
 @pytest.mark.parametrize("form", ["mcap", "folder"])
-def test_bayer_is_refused_naming_the_encoding(tmp_path, form):
-    path = tmp_path / ("bayer.mcap" if form == "mcap" else "bayer")
-    with (RecordingWriter(path, ros2=True) if form == "mcap" else Rosbag2Writer(path)) as w:
-        _write_raw_ros(w, "bayer_rggb8")
-    refused = "/stereo/left/image: image encoding 'bayer_rggb8' \\(Bayer\\) is not supported"
-    with pytest.raises(RecordingError, match=refused):
-        Recording(path)
+def test_bayer_bags_are_demosaiced_and_float_images_refused(tmp_path, form):
+    """A Bayer bag opens and reads (it was refused): a grey scene's mosaic is the grey image, which
+    demosaicing keeps within 2 levels where it is smooth (colour: test_recording); a 32FC1 (depth) image
+    topic is refused when the bag opens, naming the encoding."""
+    def smooth(i):
+        return cv2.GaussianBlur(helpers.image(i), (0, 0), 3)
+
+    images = {}
+    for encoding in ("mono8", "bayer_grbg8", "32FC1"):
+        path = tmp_path / (f"{encoding}.mcap" if form == "mcap" else encoding)
+        with (RecordingWriter(path, ros2=True) if form == "mcap" else Rosbag2Writer(path)) as w:
+            _write_raw_ros(w, encoding, pixels=smooth)
+        if encoding == "32FC1":
+            with pytest.raises(RecordingError, match="/stereo/left/image: image encoding '32FC1' holds floating"):
+                Recording(path)
+            continue
+        with Recording(path) as rec:
+            images[encoding] = [f.left.astype(int) for f in rec.frames()]
+    assert len(images["bayer_grbg8"]) == 3
+    for mono, bayer in zip(images["mono8"], images["bayer_grbg8"]):
+        assert np.abs(mono - bayer)[2:-2, 2:-2].max() <= 2
 
 
 def test_tf_static_is_static_forever(tmp_path):

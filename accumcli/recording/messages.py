@@ -1,7 +1,8 @@
 """Conversions between Foxglove protobuf messages and numpy / library types.
 
 Images become (H, W) uint8 grey arrays: colour is converted with OpenCV's
-weights, mono16 is scaled by 255/65535 (little-endian, as Foxglove's RawImage).
+weights, Bayer demosaiced first, YUV 4:2:2 gives its luma (``RAW_ENCODINGS``); 16-bit data is
+scaled to its bit depth (``sixteen_bit_full_scale``; little-endian, as Foxglove's RawImage).
 Before any pixel is decoded, ``image_size`` reads the size from the PNG or JPEG
 header (or the RawImage fields), so an image larger than ``MAX_SIDE`` /
 ``MAX_PIXELS`` or of another size than its calibration is refused without
@@ -30,8 +31,37 @@ from google.protobuf.timestamp_pb2 import Timestamp
 
 from .calibration import MAX_PIXELS, MAX_SIDE, CameraCalibration, size_problem  # noqa: F401
 
-RAW_ENCODINGS = {"mono8": (1, np.uint8), "8UC1": (1, np.uint8), "rgb8": (3, np.uint8), "bgr8": (3, np.uint8),
-                 "mono16": (1, np.dtype("<u2")), "16UC1": (1, np.dtype("<u2"))}
+_U16 = np.dtype("<u2")
+# raw encoding -> (channels, dtype, OpenCV conversion to grey or None): every encoding Foxglove's RawImage
+# lists (but 32FC1) and ROS's colour, 16-bit and Bayer ones. Bayer codes as cv_bridge's: OpenCV names a
+# pattern by the second row's first two pixels, so ROS's rggb is OpenCV's BG.
+RAW_ENCODINGS = {
+    "mono8": (1, np.uint8, None), "8UC1": (1, np.uint8, None), "mono16": (1, _U16, None), "16UC1": (1, _U16, None),
+    "rgb8": (3, np.uint8, cv2.COLOR_RGB2GRAY), "bgr8": (3, np.uint8, cv2.COLOR_BGR2GRAY),
+    "8UC3": (3, np.uint8, cv2.COLOR_BGR2GRAY), "rgba8": (4, np.uint8, cv2.COLOR_RGBA2GRAY),
+    "bgra8": (4, np.uint8, cv2.COLOR_BGRA2GRAY), "8UC4": (4, np.uint8, cv2.COLOR_BGRA2GRAY),
+    "rgb16": (3, _U16, cv2.COLOR_RGB2GRAY), "bgr16": (3, _U16, cv2.COLOR_BGR2GRAY),
+    "rgba16": (4, _U16, cv2.COLOR_RGBA2GRAY), "bgra16": (4, _U16, cv2.COLOR_BGRA2GRAY),
+    **{f"bayer_{pattern}{bits}": (1, np.uint8 if bits == 8 else _U16, code)
+       for pattern, code in (("rggb", cv2.COLOR_BayerBG2GRAY), ("bggr", cv2.COLOR_BayerRG2GRAY),
+                             ("gbrg", cv2.COLOR_BayerGR2GRAY), ("grbg", cv2.COLOR_BayerGB2GRAY)) for bits in (8, 16)},
+    "uyvy": (2, np.uint8, cv2.COLOR_YUV2GRAY_UYVY), "yuv422": (2, np.uint8, cv2.COLOR_YUV2GRAY_UYVY),
+    "yuyv": (2, np.uint8, cv2.COLOR_YUV2GRAY_YUY2), "yuv422_yuy2": (2, np.uint8, cv2.COLOR_YUV2GRAY_YUY2),
+}
+SIXTEEN_BIT = tuple(name for name, (_, dtype, _) in RAW_ENCODINGS.items() if dtype == _U16)
+
+
+def encoding_problem(msg) -> str | None:
+    """Why a raw image's encoding cannot be read (for an error when the recording opens: every
+    frame would fail alike), or None: a compressed image, or an encoding of ``RAW_ENCODINGS``."""
+    encoding = getattr(msg, "encoding", None)
+    if encoding is None or encoding in RAW_ENCODINGS:
+        return None
+    if encoding in ("32FC1", "64FC1"):
+        return (f"image encoding {encoding!r} holds floating-point values (a depth or disparity map?); "
+                "accum needs the cameras' intensity images: choose their topics")
+    return (f"image encoding {encoding!r} is not supported (supported: {', '.join(RAW_ENCODINGS)}); "
+            "convert the images to one of them, e.g. with image_proc")
 
 
 INT64_MIN, INT64_MAX = -(1 << 63), (1 << 63) - 1
@@ -134,7 +164,7 @@ def sixteen_bit_full_scale(msg) -> int | None:
     16 grey levels and its edges are lost (completeness 0.09 instead of 0.91 on the sample; a 16-bit
     PNG of 12-bit data gave an empty model)."""
     data = getattr(msg, "data", b"")
-    if getattr(msg, "encoding", None) in ("mono16", "16UC1") and data:
+    if getattr(msg, "encoding", None) in SIXTEEN_BIT and data:
         largest = int(np.frombuffer(data[:len(data) // 2 * 2], "<u2").max())
     elif hasattr(msg, "format") and data[:8] == PNG_SIGNATURE and len(data) > 24 and data[24] == 16:
         image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)   # the IHDR says 16 bits
@@ -174,11 +204,14 @@ def decode_image(msg, expected_size: tuple[int, int] | None = None, full_scale: 
                               + (f": {said}" if said else ""))
         if image.shape[1] != width or image.shape[0] != height:
             raise DecodeError(f"decoded image is {image.shape[1]}x{image.shape[0]}, its header said {width}x{height}")
+        source = msg.format.split(";")[0].strip()   # ROS image_transport: "bayer_rggb8; png compressed "
+        if source.startswith("bayer_") and source in RAW_ENCODINGS and image.ndim == 2:
+            image = cv2.cvtColor(image, RAW_ENCODINGS[source][2])   # the mosaic itself, compressed
     else:
-        if msg.encoding not in RAW_ENCODINGS:
-            raise DecodeError(f"raw image encoding {msg.encoding!r} is not supported "
-                              f"(expected one of {', '.join(RAW_ENCODINGS)})")
-        channels, dtype = RAW_ENCODINGS[msg.encoding]
+        problem = encoding_problem(msg)
+        if problem:
+            raise DecodeError(problem)
+        channels, dtype, to_grey = RAW_ENCODINGS[msg.encoding]
         row_bytes = msg.width * channels * np.dtype(dtype).itemsize
         step = msg.step or row_bytes
         if msg.width == 0 or msg.height == 0 or step < row_bytes or len(msg.data) < step * (msg.height - 1) + row_bytes:
@@ -187,14 +220,24 @@ def decode_image(msg, expected_size: tuple[int, int] | None = None, full_scale: 
         rows = np.lib.stride_tricks.as_strided(
             np.frombuffer(msg.data, np.uint8), shape=(msg.height, row_bytes), strides=(step, 1))
         image = rows.copy().view(dtype).reshape(msg.height, msg.width, channels)
-        if msg.encoding == "rgb8":
-            image = image[:, :, ::-1]
+        image = image[:, :, 0] if to_grey is None else _to_grey(image, to_grey, msg)
     if image.ndim == 3:
         image = image[:, :, 0] if image.shape[2] == 1 else cv2.cvtColor(
             image, cv2.COLOR_BGRA2GRAY if image.shape[2] == 4 else cv2.COLOR_BGR2GRAY)
     if image.dtype == np.uint16:
         image = cv2.convertScaleAbs(image, alpha=255.0 / full_scale)
     return np.ascontiguousarray(image, dtype=np.uint8)
+
+
+def _to_grey(image: np.ndarray, code: int, msg) -> np.ndarray:
+    """(H, W) grey of a raw colour, Bayer or YUV 4:2:2 ``image`` (H, W, channels) by OpenCV's ``code``.
+    Bayer is demosaiced (bilinear) before the grey, never read as grey: a raw pattern's pixels alternate
+    between the filters' responses, a grid of edges. YUV 4:2:2's grey is its luma."""
+    if msg.encoding.startswith(("uyvy", "yuyv", "yuv422")) and msg.width % 2:
+        raise DecodeError(f"{msg.encoding} image {msg.width} px wide: YUV 4:2:2 needs an even width")
+    if msg.encoding.startswith("bayer_") and (msg.width < 2 or msg.height < 2):
+        raise DecodeError(f"{msg.encoding} image {msg.width}x{msg.height}: a Bayer pattern needs 2x2 pixels")
+    return cv2.cvtColor(image if image.shape[2] > 1 else image[:, :, 0], code)
 
 
 def calibration_from_msg(msg) -> CameraCalibration:

@@ -36,7 +36,8 @@ Choices where formats.md is silent:
   checking the channel's schema name (a topic carrying another type is a
   ``RecordingError``); the recording's descriptor set is not compiled. CDR
   messages are decoded with the channel's own ros2msg schema (``ros2``).
-- Images in a Bayer encoding are a ``RecordingError`` when the recording opens.
+- Raw images in an encoding that ``messages`` cannot read (``encoding_problem``: e.g. 32FC1 depth)
+  are a ``RecordingError`` when the recording opens: every frame would fail alike.
 - When a default topic is missing and the recording has ROS 2 image topics with
   CameraInfo siblings, the error proposes the four topic options
   (``ros2.propose_topics``).
@@ -83,6 +84,7 @@ from .messages import (
     DecodeError,
     calibration_from_msg,
     decode_image,
+    encoding_problem,
     image_encoding,
     image_size,
     sixteen_bit_full_scale,
@@ -402,7 +404,7 @@ class Recording:
         with LimitedWarnings(log, prefix=f"{self.path}: ") as warn:
             for topic, log_time, msg in self._scan(warn, wanted, first=True):
                 if topic in (t.left_image, t.right_image):
-                    refused = ros2.unsupported_encoding(msg)
+                    refused = encoding_problem(msg)
                     if refused:
                         raise self._fail(f"{topic}: {refused}")
                     t_ns = self._stamp(msg, log_time, warn, topic)

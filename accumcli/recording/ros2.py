@@ -3,10 +3,10 @@ files, read into the same Foxglove protobuf messages the protobuf path decodes, 
 after decoding (``reader``, ``messages``) is one code path.
 
 Conversions (ROS 2 message -> Foxglove protobuf message):
-- ``sensor_msgs/msg/Image`` -> ``foxglove.RawImage`` (width, height, encoding, step, data). mono16
-  with ``is_bigendian`` set is byte-swapped to the little-endian RawImage layout. ``bayer_*``
-  encodings are refused when the recording is opened (``unsupported_encoding``): accum does not
-  demosaic.
+- ``sensor_msgs/msg/Image`` -> ``foxglove.RawImage`` (width, height, encoding, step, data). 16-bit
+  data with ``is_bigendian`` set is byte-swapped to the little-endian RawImage layout. The encodings
+  read (colour, 16-bit, Bayer, YUV 4:2:2) are ``messages.RAW_ENCODINGS``; others are refused when the
+  recording opens (``messages.encoding_problem``).
 - ``sensor_msgs/msg/CompressedImage`` -> ``foxglove.CompressedImage`` (format, data; PNG or JPEG by
   signature, as for protobuf).
 - ``sensor_msgs/msg/CameraInfo`` -> ``foxglove.CameraCalibration``: d, k, r, p to D, K, R, P;
@@ -40,6 +40,7 @@ from google.protobuf.timestamp_pb2 import Timestamp
 
 from ..errors import RecordingError
 from .mcap_records import _Channel, _Message
+from .messages import SIXTEEN_BIT
 
 ROS_IMAGE, ROS_COMPRESSED = "sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage"
 ROS_CAMERA_INFO, ROS_TF = "sensor_msgs/msg/CameraInfo", "tf2_msgs/msg/TFMessage"
@@ -64,7 +65,7 @@ def _with_stamp(msg, header):
 def image_from_ros(m) -> RawImage:
     data = bytes(m.data)
     encoding = str(m.encoding)
-    if m.is_bigendian and encoding in ("mono16", "16UC1"):
+    if m.is_bigendian and encoding in SIXTEEN_BIT:
         data = np.frombuffer(data[:len(data) // 2 * 2], ">u2").astype("<u2").tobytes()
     return _with_stamp(RawImage(frame_id=m.header.frame_id, width=int(m.width), height=int(m.height),
                                 encoding=encoding, step=int(m.step), data=data), m.header)
@@ -96,15 +97,6 @@ def transforms_from_ros(m) -> FrameTransforms:
 
 CONVERTERS: dict[str, Callable] = {ROS_IMAGE: image_from_ros, ROS_COMPRESSED: compressed_from_ros,
                                    ROS_CAMERA_INFO: calibration_from_ros, ROS_TF: transforms_from_ros}
-
-
-def unsupported_encoding(msg) -> str | None:
-    """Why an image (converted) cannot be used at all, for an error when opening; None if it may be."""
-    encoding = getattr(msg, "encoding", "")
-    if encoding.startswith("bayer_"):
-        return (f"image encoding {encoding!r} (Bayer) is not supported (accum does not demosaic): record "
-                "mono8, mono16, rgb8 or bgr8 images, or run image_proc's debayer node first")
-    return None
 
 
 def mcap_cdr_decoder(channel: _Channel) -> Callable[[memoryview], object]:
