@@ -126,9 +126,10 @@ class BatchResult:
         return sum(r["status"].startswith("error") for r in self.rows)
 
 
-def run_batch(recordings, outdir, options: BatchOptions = BatchOptions(), *, workers: int = 1,
+def run_batch(recordings, outdir, options: BatchOptions = BatchOptions(), *, workers: int | None = None,
               ray_address: str | None = None, progress=lambda done, total: None) -> BatchResult:
-    """Every recording as one task (local process pool of ``workers``, or Ray at ``ray_address``);
+    """Every recording as one task (local process pool of ``workers``, None: 1; or Ray at ``ray_address``,
+    which schedules them by the cluster's CPUs: ``workers`` is then refused, not silently ignored);
     rows in the order of ``recordings``; ``OUTDIR/summary.csv`` written at the end."""
     recordings = [str(r) for r in recordings]
     if not recordings:
@@ -137,6 +138,10 @@ def run_batch(recordings, outdir, options: BatchOptions = BatchOptions(), *, wor
     if len(set(names)) != len(names):
         twice = sorted({n for n in names if names.count(n) > 1})
         raise InputError(f"two recordings have the same name ({', '.join(twice)}): their outputs would collide")
+    if ray_address is not None and workers is not None:
+        raise InputError("--workers sets the local pool's processes; with --ray the cluster schedules the "
+                         "recordings on its CPUs: drop --workers")
+    workers = 1 if workers is None else workers
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise InputError(f"expected at least 1 worker, found {workers}")
     if ray_address is None:

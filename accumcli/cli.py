@@ -258,7 +258,7 @@ def info(recording, options, as_json):
                                                    "steps", "cross"})), help="[default: drawn; classic: box]")
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--size-mm", type=click.FloatRange(10, 300), help="Largest dimension of the object [drawn: 30 to 120].")
-@click.option("--distance", type=click.FloatRange(0.2, 3.0),
+@click.option("--distance", type=click.FloatRange(0.25, 3.0),
               help="Depth of the object's path, m [drawn: 0.45 to 0.85].")
 @click.option("--contrast", type=click.FloatRange(0.0, 0.9), help="Object against background albedo [drawn: 0.05 to "
               "0.45].")
@@ -466,7 +466,7 @@ def _object_frame_given() -> bool:
 @click.option("--png", **_OUTPUT_PATH,
               help="Write a picture: every model side by side, over a truth's edges in magenta (with a "
                    "recording: one frame, its extraction and each model in that camera).")
-@click.option("--png-frame", type=click.IntRange(min=0), help="Frame of the recording for --png (default: middle).")
+@click.option("--png-frame", type=click.IntRange(min=0), help="Frame of the recording for --png (default: the middle of --frames).")
 @frames_option
 @recording_options
 def view(inputs, rrd, spawn, connect, png, png_frame, frames, options):
@@ -517,7 +517,8 @@ def batch(recordings, outdir, track, truth_from_sidecar, box, workers, ray_addre
     \b
     Examples:
       accum batch sample_data/sim_box.mcap -o out/batch --truth-from-sidecar --frames 0:4
-      accum batch recordings/*.mcap -o out/batch --track --workers 2 --ray local
+      accum batch recordings/*.mcap -o out/batch --track --workers 2
+      accum batch recordings/*.mcap -o out/batch --track --ray local
     """
     from .batch import BatchOptions, run_batch, table_lines
     from .pipeline import AccumulateParams

@@ -31,8 +31,9 @@ def _parse_frames(text):
 
 
 workers_option = click.option(
-    "--workers", type=click.IntRange(min=1), default=1, show_default=True,
-    help="Recordings processed at once. The output is the same whatever the number.")
+    "--workers", type=click.IntRange(min=1), default=None,
+    help="Recordings processed at once by a local pool [default: 1; not with --ray, whose cluster schedules "
+         "them]. The output is the same whatever the number.")
 
 
 def _parse_workers(text: str) -> int | None:
@@ -58,14 +59,18 @@ lines_option = click.option("--frames", "frames", default="0:", callback=library
                             "numbers (a frames file of --frames 5:15 has its frame 5 on line 0).")
 
 
+MAX_MILLISECONDS = 4e12   # 127 years: with a stamp of today (1.75e18 ns) its nanoseconds still fit an int64
+
+
 class _FiniteMilliseconds(click.ParamType):
-    """A finite number of milliseconds from ``minimum`` to 1e13 (300 years: a camera counting from its
-    boot against transforms counting from 1970 is 1.75e12 ms), so that its nanoseconds fit an int64:
-    click's FloatRange lets NaN through (every comparison with it is false), which ended in a traceback."""
+    """A finite number of milliseconds from ``minimum`` to ``MAX_MILLISECONDS`` (a camera counting from
+    its boot against transforms counting from 1970 is 1.75e12 ms), so that a stamp moved by it still
+    fits an int64 of nanoseconds: click's FloatRange lets NaN through (every comparison with it is
+    false), which ended in a traceback."""
 
     name = "float"
 
-    def __init__(self, minimum: float = -1e13):
+    def __init__(self, minimum: float = -MAX_MILLISECONDS):
         self.minimum = minimum
 
     def convert(self, value, param, ctx):
@@ -73,9 +78,9 @@ class _FiniteMilliseconds(click.ParamType):
             number = float(value)
         except (TypeError, ValueError):
             self.fail(f"{value!r} is not a number", param, ctx)
-        if not (math.isfinite(number) and self.minimum <= number <= 1e13):
-            low = "-1e13" if self.minimum == -1e13 else f"{self.minimum:g}"
-            self.fail(f"{value!r}: expected a finite number of milliseconds from {low} to 1e13", param, ctx)
+        if not (math.isfinite(number) and self.minimum <= number <= MAX_MILLISECONDS):
+            self.fail(f"{value!r}: expected a finite number of milliseconds from {self.minimum:g} to "
+                      f"{MAX_MILLISECONDS:g}", param, ctx)
         return number
 
 

@@ -17,7 +17,7 @@ pose smear) refined on frame k+1's images. So:
 4. pass 3 accumulates with the fused poses, and each frame's fused pose is refined against that
    model's accepted segments (``on_model``); each refinement is one more measurement of its frame,
    and ``fuse`` solves again with the links, the recorded poses and these; the ordinary accumulation
-   (a fourth pass) uses the result. The links rest on one frame's own segments, whose triangulation
+   (the fifth pass over the frames: pass 3 reads them twice, to accumulate and to refine) uses the result. The links rest on one frame's own segments, whose triangulation
    errors bias the out-of-plane rotation by 2-7 deg on some links; the model of all frames averages
    them out. On ``make motion``'s seeds 301-306 refining on the model took the worst shortfall from
    the exact poses' model from 0.044 to 0.027, on seeds 307-312, which nothing here was chosen on,

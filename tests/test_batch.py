@@ -9,6 +9,7 @@ from click.testing import CliRunner
 
 from accumcli.batch import BatchOptions, run_batch
 from accumcli.cli import main
+from accumcli.errors import InputError
 from accumcli.runs import FrameRange
 
 
@@ -50,6 +51,8 @@ def test_one_and_two_workers_and_ray_give_the_same_summary(recordings, tmp_path)
         run_batch(recordings[:2], tmp_path / name, OPTIONS, **kwargs)
         summaries.append((tmp_path / name / "summary.csv").read_text())
     assert summaries[0] == summaries[1] == summaries[2]
+    with pytest.raises(InputError, match="with --ray the cluster schedules"):   # it did nothing, silently
+        run_batch(recordings[:2], tmp_path / "both", OPTIONS, workers=2, ray_address="local")
 
 
 def test_batch_command_prints_the_table_and_exits_1_when_any_fails(recordings, tmp_path):

@@ -358,3 +358,14 @@ def test_view_places_a_model_in_its_own_frame_and_frames_selects_a_frames_files_
     rrd = tmp_path / "frames.rrd"
     view([small_recording, str(frames_file)], rrd=str(rrd), frames=FrameRange(1, 3))
     assert len(rrd_column(str(rrd), "world/frame_segments", "LineStrips3D:strips")) == 2
+
+
+@pytest.mark.parametrize("text, count, middle", [("", 36, 18), ("0:6", 36, 3), ("10:", 36, 23), ("30:99", 36, 33),
+                                                 ("40:50", 36, 40)])
+def test_the_picture_shows_the_middle_of_the_frames_selected(text, count, middle):
+    """``view --png`` without --png-frame draws the middle frame of --frames (it drew the recording's middle);
+    a range past the end names its first frame, which the view then reports missing."""
+    from accumcli.runs.base import FrameRange
+    from accumcli.runs.viewing import middle_frame
+
+    assert middle_frame(FrameRange.parse(text) if text else FrameRange(), count) == middle

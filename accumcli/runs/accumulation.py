@@ -223,7 +223,7 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
 class ExtractionStore:
     """Each frame's extraction (without its gradients) kept in a temporary file by the first pass over a
     recording and read back, in order, by the later ones: the extraction runs once however many passes
-    (``--motion tracked`` makes four), and memory stays flat (the file grows by about 160 kB a frame;
+    (``--motion tracked`` makes five: ``TRACKED_PASS_COST``), and memory stays flat (the file grows by about 160 kB a frame;
     it is deleted when closed or collected)."""
 
     def __init__(self):

@@ -1,5 +1,6 @@
 """Checks that inputs given together belong together (a truth of another recording gives
-figures of 0 that look like a result: refuse it instead)."""
+figures of 0 that look like a result: refuse it instead where its object frame or its times
+tell; recordings simulated alike share their times, and there eval can only warn)."""
 
 from __future__ import annotations
 

@@ -131,7 +131,7 @@ def view(paths, *, rrd=None, spawn: bool = False, connect: str | None = None, pn
         if rrd or spawn or connect:
             _log_to_rerun(inputs, files.path(rrd) if rrd else None, spawn, connect, options, frames, progress)
         if png:
-            _draw_picture(inputs, files.open(png, "wb"), png_frame, options)
+            _draw_picture(inputs, files.open(png, "wb"), png_frame, frames, options)
     return [str(p) for p in (rrd, png) if p]
 
 
@@ -207,8 +207,15 @@ def _log_to_rerun(inputs: ViewInputs, rrd, spawn, connect, options, frames, prog
     viz.close()
 
 
-def _draw_picture(inputs: ViewInputs, png, png_frame, options) -> None:
-    """The model alone, or (with a recording) one frame, its extraction and the model, as in the paper."""
+def middle_frame(frames, count: int) -> int:
+    """The middle one of the frames ``frames`` (a ``FrameRange``) selects from a recording of ``count``."""
+    stop = count if frames.stop is None else min(frames.stop, count)
+    return frames.start + max(stop - frames.start, 0) // 2
+
+
+def _draw_picture(inputs: ViewInputs, png, png_frame, frames, options) -> None:
+    """The model alone, or (with a recording) one frame, its extraction and the model, as in the paper:
+    ``png_frame``, or the middle one of ``frames`` (a ``FrameRange``)."""
     from ..extract import extract_frame
     from ..render import render_frame_panel, render_model, render_models, write_png
 
@@ -216,9 +223,10 @@ def _draw_picture(inputs: ViewInputs, png, png_frame, options) -> None:
         raise InputError("a picture (--png) needs a model among the inputs")
     # every model, over the truth's edges (the truth alone is drawn as a model)
     named = inputs.models or {"truth": inputs.truth}
-    frames = {m.frame_id for m in named.values() if m.frame_id}
-    if len(frames) > 1:
-        log.warning("the models are in different object frames (%s): drawn as one object", ", ".join(sorted(frames)))
+    object_frames = {m.frame_id for m in named.values() if m.frame_id}
+    if len(object_frames) > 1:
+        log.warning("the models are in different object frames (%s): drawn as one object",
+                    ", ".join(sorted(object_frames)))
     truth_ends = inputs.truth.endpoints() if inputs.models and inputs.truth is not None else None
     if not inputs.recording:
         write_png(png, render_model(*named.values(), truth_ends=truth_ends) if len(named) == 1
@@ -226,7 +234,7 @@ def _draw_picture(inputs: ViewInputs, png, png_frame, options) -> None:
         return
     with options.open(inputs.recording, require_pose=False) as rec:
         inputs.check_tracks(rec.time_span_ns, options.tolerance_ns, inputs.recording)
-        wanted = png_frame if png_frame is not None else rec.frame_count_hint // 2
+        wanted = png_frame if png_frame is not None else middle_frame(frames, rec.frame_count_hint)
         for frame in rec.frames(wanted, wanted + 1):
             T, source = inputs.pose_at(frame.timestamp_ns, frame.T_camera_object, options.tolerance_ns)
             if T is None:
