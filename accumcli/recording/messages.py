@@ -14,6 +14,7 @@ the ``DecodeError`` or is dropped, never written to the terminal.
 from __future__ import annotations
 
 import atexit
+import json
 import os
 import struct
 import tempfile
@@ -27,6 +28,7 @@ from foxglove_schemas_protobuf.CameraCalibration_pb2 import (
 from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+from google.protobuf import json_format
 from google.protobuf.timestamp_pb2 import Timestamp
 
 from .calibration import MAX_PIXELS, MAX_SIDE, CameraCalibration, size_problem  # noqa: F401
@@ -238,6 +240,31 @@ def _to_grey(image: np.ndarray, code: int, msg) -> np.ndarray:
     if msg.encoding.startswith("bayer_") and (msg.width < 2 or msg.height < 2):
         raise DecodeError(f"{msg.encoding} image {msg.width}x{msg.height}: a Bayer pattern needs 2x2 pixels")
     return cv2.cvtColor(image if image.shape[2] > 1 else image[:, :, 0], code)
+
+
+def from_foxglove_json(cls, data):
+    """A message of protobuf class ``cls`` from its Foxglove JSON encoding (an MCAP channel with message
+    encoding ``json``, as Foxglove's SDKs and bridges write the same schemas): times are
+    ``{"sec", "nsec"}`` objects, bytes base64 strings, unknown fields ignored. Raises ValueError.
+    Why by hand: protobuf's JSON parser takes the rest as it is, but wants times as RFC 3339 text."""
+    doc = json.loads(bytes(data))
+    if not isinstance(doc, dict):
+        raise ValueError("the message is not a JSON object")
+    try:
+        return json_format.ParseDict(_times_as_text(doc), cls(), ignore_unknown_fields=True)
+    except json_format.ParseError as e:
+        raise ValueError(" ".join(str(e).split())[:200]) from None
+
+
+def _times_as_text(value):
+    """``value`` with every Foxglove time object ({"sec": s, "nsec": n}) as protobuf's RFC 3339 text."""
+    if isinstance(value, dict):
+        if value and set(value) <= {"sec", "nsec"}:
+            return Timestamp(seconds=int(value.get("sec", 0)), nanos=int(value.get("nsec", 0))).ToJsonString()
+        return {k: _times_as_text(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_times_as_text(v) for v in value]
+    return value
 
 
 def calibration_from_msg(msg) -> CameraCalibration:

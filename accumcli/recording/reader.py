@@ -85,6 +85,7 @@ from .messages import (
     calibration_from_msg,
     decode_image,
     encoding_problem,
+    from_foxglove_json,
     image_encoding,
     image_size,
     sixteen_bit_full_scale,
@@ -329,13 +330,15 @@ class Recording:
 
     @staticmethod
     def _expected(role: str) -> str:
-        return (f"protobuf {' or '.join(PROTOBUF_TYPES[role])} or cdr {' or '.join(ROS_TYPES[role])}")
+        return (f"protobuf or json {' or '.join(PROTOBUF_TYPES[role])} or cdr {' or '.join(ROS_TYPES[role])}")
 
     def _decoder(self, scan, channel, role: str) -> Callable:
         """bytes -> Foxglove protobuf message for ``channel`` in its ``role``; raises RecordingError."""
         protobuf = PROTOBUF_TYPES[role].get(channel.schema_name)
         if protobuf is not None and channel.message_encoding == "protobuf":
             return lambda data: protobuf.FromString(bytes(data))
+        if protobuf is not None and channel.message_encoding == "json":
+            return lambda data: from_foxglove_json(protobuf, data)
         if channel.schema_name in ROS_TYPES[role] and channel.message_encoding == "cdr":
             if isinstance(scan, ros2.RosbagScan):
                 return scan.decoder(channel)
