@@ -320,3 +320,69 @@ def test_a_namespaced_transform_tree_is_read_with_its_own_static_topic(tmp_path)
     with pytest.raises(RecordingError, match="no transform names 'camera_left', the images' own frame; /tf_static "
                                              "has no message here"):
         Recording(bare, Topics(tf="/robot/tf"))
+
+
+TF2_MSG = "geometry_msgs/TransformStamped[] transforms"
+
+
+class _Ros1BagWriter:
+    """A ROS 1 bag (rosbags' writer, Noetic types; tf2_msgs/TFMessage from its definition) taking the ROS 2
+    messages ``convert_to_ros2`` gives: the same fields, CameraInfo's d, k, r, p as D, K, R, P, headers with
+    a seq."""
+
+    def __init__(self, path):
+        from rosbags.rosbag1 import Writer
+        from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+        self.store = get_typestore(Stores.ROS1_NOETIC)
+        self.store.register(get_types_from_msg(TF2_MSG, "tf2_msgs/msg/TFMessage"))
+        self.writer, self.connections = Writer(path), {}
+        self.writer.open()
+
+    def _ros1(self, value, msgtype):
+        cls = self.store.types[msgtype]
+        fields = {}
+        for name, field in cls.__dataclass_fields__.items():
+            if name == "__msgtype__":
+                continue
+            source = getattr(value, name) if hasattr(value, name) else getattr(value, name.lower(), 0)
+            node, detail = dict(self.store.fielddefs[msgtype][1])[name]
+            if node == 2:   # a message
+                source = self._ros1(source, detail)
+            elif node in (3, 4) and detail[0][0] == 2:   # an array or sequence of messages
+                source = [self._ros1(v, detail[0][1]) for v in source]
+            fields[name] = source
+        return cls(**fields)
+
+    def ros_message(self, topic, message, log_time):
+        if topic not in self.connections:
+            self.connections[topic] = self.writer.add_connection(topic, message.msgtype, typestore=self.store)
+        ros1 = self._ros1(message.message, message.msgtype)
+        self.writer.write(self.connections[topic], log_time, self.store.serialize_ros1(ros1, message.msgtype))
+
+    def close(self):
+        self.writer.close()
+
+
+def test_ros1_bags_give_the_protobuf_recordings_model(small_recording, tmp_path):
+    """A ROS 1 bag (rosbags' rosbag1, sensor_msgs with ROS 1's CameraInfo D, K, R, P, tf2_msgs/TFMessage
+    defined by the bag) gives the model of the protobuf recording it was converted from, byte for byte."""
+    bag = tmp_path / "run.bag"
+    writer = _Ros1BagWriter(bag)
+    convert_to_ros2(small_recording, writer)
+    writer.close()
+    assert open(bag, "rb").read(13) == b"#ROSBAG V2.0\n"
+    assert _model_bytes(str(bag), tmp_path / "ros1.json") == _model_bytes(small_recording, tmp_path / "pb.json")
+    summary, problem = describe_recording(str(bag))
+    assert problem is None and summary.stereo_frames == 6 and summary.frames_with_pose == 6
+
+
+def test_a_ros1_bag_cut_short_asks_for_reindex(small_recording, tmp_path):
+    bag = tmp_path / "run.bag"
+    writer = _Ros1BagWriter(bag)
+    convert_to_ros2(small_recording, writer)
+    writer.close()
+    cut = tmp_path / "cut.bag"
+    cut.write_bytes(bag.read_bytes()[:len(bag.read_bytes()) * 2 // 3])
+    with pytest.raises(RecordingError, match="cannot be read as a ROS 1 bag .*needs 'rosbag reindex' first"):
+        Recording(cut)

@@ -1,10 +1,10 @@
 """Streaming reader of stereo recordings (formats.md section 1).
 
 What ``path`` is, is found by content: a folder with ``metadata.yaml`` is a rosbag2 bag, a file
-starting with SQLite's magic a bare rosbag2 ``.db3`` (both read with ``rosbags``, ``ros2``); any other
-file must be MCAP, whose channels may each be Foxglove protobuf or ROS 2 CDR (``ros2msg`` schema).
-ROS 2 messages are converted to the Foxglove protobuf messages on decoding (``ros2``), so
-everything below is the same for every form.
+starting with SQLite's magic a bare rosbag2 ``.db3``, one starting with ``#ROSBAG V2.0`` a ROS 1 bag
+(all read with ``rosbags``, ``ros2``); any other file must be MCAP, whose channels may each be
+Foxglove protobuf or JSON, or ROS 2 CDR (``ros2msg`` schema). ROS messages are converted to the
+Foxglove protobuf messages on decoding (``ros2``), so everything below is the same for every form.
 
 ``Recording(path)`` reads the MCAP file front to back with accum's own record
 parser (``mcap_records``: never trusting a declared length beyond what the file
@@ -101,7 +101,7 @@ OFFSET_SAMPLES = 4096       # left/right offsets kept to measure the typical one
 IMAGE_TYPES = {"foxglove.CompressedImage": CompressedImage, "foxglove.RawImage": RawImage}
 CALIBRATION_TYPES = {"foxglove.CameraCalibration": CalibrationMsg}
 TF_TYPES = {"foxglove.FrameTransform": FrameTransform, "foxglove.FrameTransforms": FrameTransforms}
-ROS_TYPES = {"image": ros2.ROS_IMAGE_TYPES, "calibration": (ros2.ROS_CAMERA_INFO,), "tf": (ros2.ROS_TF,)}
+ROS_TYPES = {"image": ros2.ROS_IMAGE_TYPES, "calibration": (ros2.ROS_CAMERA_INFO,), "tf": (ros2.ROS_TF, ros2.ROS1_TF)}
 PROTOBUF_TYPES = {"image": IMAGE_TYPES, "calibration": CALIBRATION_TYPES, "tf": TF_TYPES}
 
 
@@ -339,6 +339,8 @@ class Recording:
             return lambda data: protobuf.FromString(bytes(data))
         if protobuf is not None and channel.message_encoding == "json":
             return lambda data: from_foxglove_json(protobuf, data)
+        if channel.schema_name in ROS_TYPES[role] and channel.message_encoding == "ros1":
+            return scan.decoder(channel)   # only a ROS 1 bag's channels are ros1
         if channel.schema_name in ROS_TYPES[role] and channel.message_encoding == "cdr":
             if isinstance(scan, ros2.RosbagScan):
                 return scan.decoder(channel)
@@ -357,7 +359,8 @@ class Recording:
         damage report (``_first_scan``).
         """
         channels, schemas, roles, decoders = {}, {}, self._roles(), {}
-        scan = ros2.RosbagScan(self.path, channels) if self.bag else McapScan(self.path, warn, channels, schemas)
+        scan = ros2.RosbagScan(self.path, channels, self.bag) if self.bag else McapScan(self.path, warn, channels,
+                                                                                        schemas)
         counts: dict[int, int] = {}
         if first:
             self._first_scan, self.message_counts, self._channels_seen = scan, counts, channels
@@ -463,7 +466,7 @@ class Recording:
         self.pairing_tolerance_ms = pairing.covering_tolerance_ms
         self._channels = {c.topic: c for c in self._channels_seen.values()}
         if not self._channels and self.bag:
-            raise self._fail("rosbag2 bag without any topic")
+            raise self._fail("ROS bag without any topic")
         if not self._channels:
             how = "truncated" if self.truncated else "corrupt"
             raise self._fail(f"{how} MCAP file: no readable channel in its {self.size} bytes"

@@ -45,7 +45,9 @@ from .messages import SIXTEEN_BIT
 ROS_IMAGE, ROS_COMPRESSED = "sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage"
 ROS_CAMERA_INFO, ROS_TF = "sensor_msgs/msg/CameraInfo", "tf2_msgs/msg/TFMessage"
 ROS_IMAGE_TYPES = (ROS_IMAGE, ROS_COMPRESSED)
+ROS1_TF = "tf/msg/tfMessage"       # ROS 1's tf (before tf2), the same fields
 SQLITE_MAGIC = b"SQLite format 3\x00"
+ROSBAG1_MAGIC = b"#ROSBAG V2.0\n"
 
 log = logging.getLogger("accumcli")
 
@@ -77,10 +79,11 @@ def compressed_from_ros(m) -> CompressedImage:
 
 
 def calibration_from_ros(m) -> CalibrationMsg:
+    d, k, r, p = (getattr(m, name) if hasattr(m, name) else getattr(m, name.upper()) for name in "dkrp")  # ROS 1: D...
     return _with_stamp(CalibrationMsg(
         frame_id=m.header.frame_id, width=int(m.width), height=int(m.height),
-        distortion_model=str(m.distortion_model), D=[float(v) for v in m.d], K=[float(v) for v in m.k],
-        R=[float(v) for v in m.r], P=[float(v) for v in m.p]), m.header)
+        distortion_model=str(m.distortion_model), D=[float(v) for v in d], K=[float(v) for v in k],
+        R=[float(v) for v in r], P=[float(v) for v in p]), m.header)
 
 
 def transforms_from_ros(m) -> FrameTransforms:
@@ -96,7 +99,8 @@ def transforms_from_ros(m) -> FrameTransforms:
 
 
 CONVERTERS: dict[str, Callable] = {ROS_IMAGE: image_from_ros, ROS_COMPRESSED: compressed_from_ros,
-                                   ROS_CAMERA_INFO: calibration_from_ros, ROS_TF: transforms_from_ros}
+                                   ROS_CAMERA_INFO: calibration_from_ros, ROS_TF: transforms_from_ros,
+                                   ROS1_TF: transforms_from_ros}
 
 
 def mcap_cdr_decoder(channel: _Channel) -> Callable[[memoryview], object]:
@@ -137,30 +141,39 @@ def _one_line(e: Exception) -> str:
 
 
 def bag_kind(path: str) -> str | None:
-    """'rosbag2' for a folder with metadata.yaml, 'db3' for an SQLite file, None otherwise."""
+    """'rosbag2' for a folder with metadata.yaml, 'db3' for an SQLite file, 'rosbag1' for a ROS 1 bag,
+    None otherwise."""
     if os.path.isdir(path):
         return "rosbag2" if os.path.isfile(os.path.join(path, "metadata.yaml")) else None
     try:
         with open(path, "rb") as f:
-            return "db3" if f.read(len(SQLITE_MAGIC)) == SQLITE_MAGIC else None
+            head = f.read(max(len(SQLITE_MAGIC), len(ROSBAG1_MAGIC)))
     except OSError:
         return None
+    return "db3" if head.startswith(SQLITE_MAGIC) else "rosbag1" if head.startswith(ROSBAG1_MAGIC) else None
 
 
 class RosbagScan:
-    """One pass over a rosbag2 folder or ``.db3`` with ``rosbags``, with ``McapScan``'s interface:
-    ``messages()`` yields ``_Message`` in the bag's time order, ``channels`` fills as the bag opens;
-    ``decoder(channel)`` gives bytes -> Foxglove protobuf message. A bag ``rosbags`` cannot open is a
-    ``RecordingError``; the damage fields stay empty (rosbags reads whole files or fails)."""
+    """One pass over a rosbag2 folder or ``.db3``, or a ROS 1 ``.bag`` (``kind`` 'rosbag1'), with
+    ``rosbags``, with ``McapScan``'s interface: ``messages()`` yields ``_Message`` in the bag's time
+    order, ``channels`` fills as the bag opens; ``decoder(channel)`` gives bytes -> Foxglove protobuf
+    message. A bag ``rosbags`` cannot open is a ``RecordingError``; the damage fields stay empty
+    (rosbags reads whole files or fails). ROS 1 messages are decoded with the Noetic types and the
+    definitions the bag carries (its connections'), ``tf/tfMessage`` as ``tf2_msgs/TFMessage``, and
+    CameraInfo's ``D, K, R, P`` as ROS 2's ``d, k, r, p``."""
 
     lost_bytes, broken, footer, last_time_ns = 0, None, True, None
 
-    def __init__(self, path: str, channels: dict):
-        self.path, self.channels = path, channels
+    def __init__(self, path: str, channels: dict, kind: str = "rosbag2"):
+        self.path, self.channels, self.kind = path, channels, kind
+        self.name = "ROS 1 bag" if kind == "rosbag1" else "rosbag2 bag"
+        self.store = None   # ROS 1: the Noetic types with the bag's own definitions
 
     def _open(self):
-        from rosbags.rosbag2 import Reader
-
+        if self.kind == "rosbag1":
+            from rosbags.rosbag1 import Reader
+        else:
+            from rosbags.rosbag2 import Reader
         reader = Reader(self.path)
         reader.open()
         return reader
@@ -169,25 +182,49 @@ class RosbagScan:
         try:
             reader = self._open()
         except Exception as e:  # rosbags raises its own errors, and sqlite3 / yaml ones through it
-            raise RecordingError(f"{self.path}: cannot be read as a rosbag2 bag ({_one_line(e)})") from None
+            hint = ("; a bag cut short (a .bag.active of a recorder that was killed) needs 'rosbag reindex' first"
+                    if self.kind == "rosbag1" and "index" in str(e).lower() else "")
+            raise RecordingError(f"{self.path}: cannot be read as a {self.name} ({_one_line(e)}){hint}") from None
         try:
+            if self.kind == "rosbag1":
+                self.store = _ros1_typestore(reader.connections)
             for c in reader.connections:
-                self.channels[c.id] = _Channel(c.id, c.msgtype, c.topic, c.ext.serialization_format
-                                               if hasattr(c.ext, "serialization_format") else "cdr")
+                encoding = "ros1" if self.kind == "rosbag1" else getattr(c.ext, "serialization_format", "cdr")
+                self.channels[c.id] = _Channel(c.id, c.msgtype, c.topic, encoding)
             try:
                 for c, timestamp, data in reader.messages():
                     self.last_time_ns = timestamp
                     yield _Message(c.id, int(timestamp), memoryview(data))
             except Exception as e:
-                raise RecordingError(f"{self.path}: rosbag2 bag damaged after {self.last_time_ns or 0} ns "
+                raise RecordingError(f"{self.path}: {self.name} damaged after {self.last_time_ns or 0} ns "
                                      f"({type(e).__name__}: {_one_line(e)})") from None
         finally:
             reader.close()
 
-    @staticmethod
-    def decoder(channel: _Channel) -> Callable[[memoryview], object]:
-        store, convert, name = typestore(), CONVERTERS[channel.schema_name], channel.schema_name
+    def decoder(self, channel: _Channel) -> Callable[[memoryview], object]:
+        convert, name = CONVERTERS[channel.schema_name], channel.schema_name
+        if self.kind == "rosbag1":
+            store = self.store
+            return lambda data: convert(store.deserialize_ros1(bytes(data), name))
+        store = typestore()
         return lambda data: convert(store.deserialize_cdr(bytes(data), name))
+
+
+def _ros1_typestore(connections):
+    """The ROS 1 Noetic typestore with the message definitions of a bag's ``connections`` of the types
+    accum reads (Noetic's store lacks tf2_msgs; a bag of another distribution carries its own)."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    for c in connections:
+        if c.msgtype in CONVERTERS and c.msgtype not in store.types:
+            definition = getattr(c.msgdef, "data", c.msgdef)
+            try:
+                store.register(get_types_from_msg(definition, c.msgtype))
+            except Exception as e:  # rosbags' parser raises its own error types
+                raise RecordingError(f"{c.topic}: the bag's definition of {c.msgtype} cannot be parsed "
+                                     f"({_one_line(e)})") from None
+    return store
 
 
 def propose_topics(channels: dict[str, _Channel], image_types=ROS_IMAGE_TYPES,
