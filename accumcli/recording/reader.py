@@ -321,7 +321,8 @@ class Recording:
         except OSError as e:
             raise self._fail(f"cannot be read ({e.strerror or e})") from None
         if head != MCAP_MAGIC:
-            raise self._fail("not an MCAP file (wrong magic bytes)")
+            raise self._fail("not an MCAP file (wrong magic bytes), nor a ROS 1 bag or rosbag2 .db3: give an MCAP "
+                             "recording, a rosbag2 folder or a ROS 1 .bag")
 
     def _roles(self) -> dict[str, str]:
         t = self.topics
