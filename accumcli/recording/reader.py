@@ -340,8 +340,9 @@ class Recording:
             return lambda data: protobuf.FromString(bytes(data))
         if protobuf is not None and channel.message_encoding == "json":
             return lambda data: from_foxglove_json(protobuf, data)
-        if channel.schema_name in ROS_TYPES[role] and channel.message_encoding == "ros1":
-            return scan.decoder(channel)   # only a ROS 1 bag's channels are ros1
+        if (channel.schema_name in ROS_TYPES[role] and channel.message_encoding == "ros1"
+                and isinstance(scan, ros2.RosbagScan)):   # a ROS 1 bag's (not an MCAP's ros1msg channels)
+            return scan.decoder(channel)
         if channel.schema_name in ROS_TYPES[role] and channel.message_encoding == "cdr":
             if isinstance(scan, ros2.RosbagScan):
                 return scan.decoder(channel)
