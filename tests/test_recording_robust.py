@@ -136,7 +136,7 @@ def test_topic_with_the_wrong_message_type(tmp_path):
     path = fuzz.build(tmp_path / "r.mcap", extra=[("/stereo/right/calibration", FrameTransform(), T0 + 1, None,
                                                    None, "protobuf")])
     with pytest.raises(RecordingError, match="topic /stereo/right/calibration carries foxglove.FrameTransform "
-                                             r"\(protobuf encoding\), expected protobuf or json foxglove.CameraCalibration"):
+                                             r"\(protobuf encoding\), expected protobuf or json foxglove.CameraCalibration or cdr or ros1"):
         frames_of(path)
 
 

@@ -331,12 +331,17 @@ class _Ros1BagWriter:
     a seq."""
 
     def __init__(self, path):
-        from rosbags.rosbag1 import Writer
         from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
         self.store = get_typestore(Stores.ROS1_NOETIC)
         self.store.register(get_types_from_msg(TF2_MSG, "tf2_msgs/msg/TFMessage"))
-        self.writer, self.connections = Writer(path), {}
+        self.connections = {}
+        self._open(path)
+
+    def _open(self, path):
+        from rosbags.rosbag1 import Writer
+
+        self.writer = Writer(path)
         self.writer.open()
 
     def _ros1(self, value, msgtype):
@@ -364,17 +369,43 @@ class _Ros1BagWriter:
         self.writer.close()
 
 
-def test_ros1_bags_give_the_protobuf_recordings_model(small_recording, tmp_path):
+class _Ros1McapWriter(_Ros1BagWriter):
+    """The same ROS 1 messages in an MCAP file with ros1msg schemas named pkg/Type, as ``mcap convert``
+    writes a ROS 1 bag."""
+
+    def _open(self, path):
+        from mcap.writer import Writer
+
+        self.file = open(path, "wb")
+        self.writer = Writer(self.file)
+        self.writer.start()
+
+    def ros_message(self, topic, message, log_time):
+        if topic not in self.connections:
+            text = self.store.generate_msgdef(message.msgtype, ros_version=1)[0]
+            schema = self.writer.register_schema(message.msgtype.replace("/msg/", "/"), "ros1msg", text.encode())
+            self.connections[topic] = self.writer.register_channel(topic, "ros1", schema)
+        data = self.store.serialize_ros1(self._ros1(message.message, message.msgtype), message.msgtype)
+        self.writer.add_message(self.connections[topic], log_time=log_time, data=bytes(data), publish_time=log_time)
+
+    def close(self):
+        self.writer.finish()
+        self.file.close()
+
+
+@pytest.mark.parametrize("writer_class", [_Ros1BagWriter, _Ros1McapWriter], ids=["bag", "mcap-ros1"])
+def test_ros1_recordings_give_the_protobuf_recordings_model(small_recording, tmp_path, writer_class):
     """A ROS 1 bag (rosbags' rosbag1, sensor_msgs with ROS 1's CameraInfo D, K, R, P, tf2_msgs/TFMessage
-    defined by the bag) gives the model of the protobuf recording it was converted from, byte for byte."""
-    bag = tmp_path / "run.bag"
-    writer = _Ros1BagWriter(bag)
+    defined by the bag), and the same messages in an MCAP with ros1msg schemas, give the model of the
+    protobuf recording they were converted from, byte for byte."""
+    path = tmp_path / ("run.bag" if writer_class is _Ros1BagWriter else "run.mcap")
+    writer = writer_class(path)
     convert_to_ros2(small_recording, writer)
     writer.close()
-    assert open(bag, "rb").read(13) == b"#ROSBAG V2.0\n"
-    assert _model_bytes(str(bag), tmp_path / "ros1.json") == _model_bytes(small_recording, tmp_path / "pb.json")
-    summary, problem = describe_recording(str(bag))
+    assert _model_bytes(str(path), tmp_path / "ros1.json") == _model_bytes(small_recording, tmp_path / "pb.json")
+    summary, problem = describe_recording(str(path))
     assert problem is None and summary.stereo_frames == 6 and summary.frames_with_pose == 6
+    assert {schema for _, schema, _ in summary.topics} >= {ROS_CAMERA_INFO, "tf2_msgs/msg/TFMessage"}
 
 
 def test_a_ros1_bag_cut_short_asks_for_reindex(small_recording, tmp_path):

@@ -133,6 +133,8 @@ class McapScan:
         else:
             channel_id, schema_id, topic, encoding = f.int(2), f.int(2), f.string(), f.string()
             name, schema_encoding, data = self.schemas.get(schema_id, ("", "", b""))
+            if encoding == "ros1" and name.count("/") == 1:   # ROS 1's pkg/Type, named as ROS 2's (and rosbags')
+                name = name.replace("/", "/msg/")
             self.channels[channel_id] = _Channel(channel_id, name, topic, encoding, schema_id, schema_encoding, data)
 
     @staticmethod

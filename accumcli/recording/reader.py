@@ -331,7 +331,7 @@ class Recording:
 
     @staticmethod
     def _expected(role: str) -> str:
-        return (f"protobuf or json {' or '.join(PROTOBUF_TYPES[role])} or cdr {' or '.join(ROS_TYPES[role])}")
+        return (f"protobuf or json {' or '.join(PROTOBUF_TYPES[role])} or cdr or ros1 {' or '.join(ROS_TYPES[role])}")
 
     def _decoder(self, scan, channel, role: str) -> Callable:
         """bytes -> Foxglove protobuf message for ``channel`` in its ``role``; raises RecordingError."""
@@ -340,14 +340,11 @@ class Recording:
             return lambda data: protobuf.FromString(bytes(data))
         if protobuf is not None and channel.message_encoding == "json":
             return lambda data: from_foxglove_json(protobuf, data)
-        if (channel.schema_name in ROS_TYPES[role] and channel.message_encoding == "ros1"
-                and isinstance(scan, ros2.RosbagScan)):   # a ROS 1 bag's (not an MCAP's ros1msg channels)
-            return scan.decoder(channel)
-        if channel.schema_name in ROS_TYPES[role] and channel.message_encoding == "cdr":
+        if channel.schema_name in ROS_TYPES[role] and channel.message_encoding in ("cdr", "ros1"):
             if isinstance(scan, ros2.RosbagScan):
                 return scan.decoder(channel)
             try:
-                return ros2.mcap_cdr_decoder(channel)
+                return (ros2.mcap_cdr_decoder if channel.message_encoding == "cdr" else ros2.mcap_ros1_decoder)(channel)
             except ValueError as e:
                 raise self._fail(f"topic {channel.topic} carries {channel.schema_name}: {e}") from None
         raise self._fail(f"topic {channel.topic} carries {channel.schema_name or 'no schema'} "

@@ -187,7 +187,8 @@ class RosbagScan:
             raise RecordingError(f"{self.path}: cannot be read as a {self.name} ({_one_line(e)}){hint}") from None
         try:
             if self.kind == "rosbag1":
-                self.store = _ros1_typestore(reader.connections)
+                self.store = _ros1_typestore([(c.topic, c.msgtype, getattr(c.msgdef, "data", c.msgdef))
+                                              for c in reader.connections])
             for c in reader.connections:
                 encoding = "ros1" if self.kind == "rosbag1" else getattr(c.ext, "serialization_format", "cdr")
                 self.channels[c.id] = _Channel(c.id, c.msgtype, c.topic, encoding)
@@ -210,21 +211,35 @@ class RosbagScan:
         return lambda data: convert(store.deserialize_cdr(bytes(data), name))
 
 
-def _ros1_typestore(connections):
-    """The ROS 1 Noetic typestore with the message definitions of a bag's ``connections`` of the types
-    accum reads (Noetic's store lacks tf2_msgs; a bag of another distribution carries its own)."""
+def _ros1_typestore(definitions):
+    """The ROS 1 Noetic typestore with the message definitions ((topic, msgtype, text) of a bag's
+    connections or an MCAP channel's ros1msg schema) of the types accum reads (Noetic's store lacks
+    tf2_msgs; a recording of another distribution carries its own)."""
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     store = get_typestore(Stores.ROS1_NOETIC)
-    for c in connections:
-        if c.msgtype in CONVERTERS and c.msgtype not in store.types:
-            definition = getattr(c.msgdef, "data", c.msgdef)
+    for topic, msgtype, text in definitions:
+        if msgtype in CONVERTERS and msgtype not in store.types:
             try:
-                store.register(get_types_from_msg(definition, c.msgtype))
+                store.register(get_types_from_msg(text, msgtype))
             except Exception as e:  # rosbags' parser raises its own error types
-                raise RecordingError(f"{c.topic}: the bag's definition of {c.msgtype} cannot be parsed "
+                raise RecordingError(f"{topic}: the recording's definition of {msgtype} cannot be parsed "
                                      f"({_one_line(e)})") from None
     return store
+
+
+def mcap_ros1_decoder(channel: _Channel) -> Callable[[memoryview], object]:
+    """bytes -> Foxglove protobuf message for an MCAP channel of ROS 1 messages with a ros1msg schema
+    (``mcap convert`` of a ROS 1 bag writes them), decoded as a ROS 1 bag's; raises ValueError when the
+    schema cannot be used."""
+    if channel.schema_encoding != "ros1msg":
+        raise ValueError(f"schema encoding {channel.schema_encoding or 'none'!r}, expected ros1msg")
+    try:
+        store = _ros1_typestore([(channel.topic, channel.schema_name, bytes(channel.schema_data).decode())])
+    except (RecordingError, UnicodeDecodeError) as e:
+        raise ValueError(f"its ros1msg schema cannot be parsed ({_one_line(e)})") from None
+    convert, name = CONVERTERS[channel.schema_name], channel.schema_name
+    return lambda data: convert(store.deserialize_ros1(bytes(data), name))
 
 
 def propose_topics(channels: dict[str, _Channel], image_types=ROS_IMAGE_TYPES,
