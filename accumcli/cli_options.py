@@ -187,24 +187,17 @@ def number_pair(text: str, sep: str, form: str, positive: bool = False) -> tuple
 
 
 def parse_box(text: str) -> tuple:
-    """``X0:X1,Y0:Y1,Z0:Z1`` (metres) as ((x0, x1), (y0, y1), (z0, z1)), each min below max."""
-    import math
-
+    """``X0:X1,Y0:Y1,Z0:Z1`` (metres) as ((x0, x1), (y0, y1), (z0, z1)), checked by the library
+    (``pipeline.check_box``)."""
     from .errors import InputError
+    from .pipeline import check_box
 
     form = "X0:X1,Y0:Y1,Z0:Z1 (metres, object frame)"
     try:
         box = tuple(tuple(float(x) for x in part.split(":")) for part in text.split(","))
     except ValueError:
         raise InputError(f"expected {form}, found {text!r}") from None
-    if len(box) != 3 or any(len(pair) != 2 for pair in box):
-        raise InputError(f"expected {form}, found {text!r}")
-    if not all(math.isfinite(lo) and math.isfinite(hi) and lo < hi for lo, hi in box):
-        raise InputError(f"expected {form} with each minimum below its maximum, found {text!r}")
-    across = max(hi - lo for lo, hi in box)
-    if across > 10.0:   # around an object a gripper holds: millimetres, most likely
-        raise InputError(f"expected {form}: a box {across:g} m across, found {text!r} (millimetres? give metres)")
-    return box
+    return check_box(box, form, shown=text)
 
 
 box_option = click.option(

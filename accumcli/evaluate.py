@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .errors import InputError
 from .geometry import invert, pose_error
 from .model_io import Truth
 from .segments import Segments
@@ -30,11 +31,25 @@ from .segments import Segments
 
 @dataclass(frozen=True)
 class Tolerances:
+    """What counts as right: a segment within ``position_tol`` (m) and ``angle_tol_deg`` of a truth edge
+    is correct, one farther than ``background_dist`` (m) from every edge is background; completeness
+    counts the truth's samples, every ``sample_spacing`` (m) along its edges, seen in at least
+    ``min_seen`` frames. ``InputError`` unless each is a positive finite number (``min_seen`` whole)."""
+
     position_tol: float = 0.004
     angle_tol_deg: float = 10.0
     background_dist: float = 0.020
     min_seen: int = 3
     sample_spacing: float = 0.002
+
+    def __post_init__(self):
+        for name in ("position_tol", "angle_tol_deg", "background_dist", "sample_spacing"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
+                    or not np.isfinite(value) or value <= 0:
+                raise InputError(f"{name}: expected a positive number, found {value!r}")
+        if isinstance(self.min_seen, bool) or not isinstance(self.min_seen, (int, np.integer)) or self.min_seen < 1:
+            raise InputError(f"min_seen: expected a whole number of frames of at least 1, found {self.min_seen!r}")
 
 
 @dataclass

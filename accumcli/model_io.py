@@ -17,14 +17,14 @@ import json
 import math
 import os
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Iterable, Iterator
 
 import numpy as np
 import orjson
 
 from .atomic import opened
-from .errors import FileFormatError
+from .errors import FileFormatError, InputError
 from .geometry import quat_from_transform, transform_from_quat
 from .segments import Segments
 
@@ -244,19 +244,34 @@ def segments_from_dict(doc: dict, where: str) -> Segments:
         observations = np.array([r.get("observations", 1) for r in rows], np.int64)
     except (KeyError, TypeError, ValueError, AttributeError) as e:
         raise FileFormatError(f"{where}: malformed segment ({type(e).__name__}: {e})") from None
-    if len(centers) != len(rows) or not (np.isfinite(centers).all() and np.isfinite(directions).all()):
+    if len(centers) != len(rows):
         raise FileFormatError(f"{where}: segments need finite 3-vectors 'center' and 'direction'")
-    norms = np.linalg.norm(directions, axis=1)
-    if np.any(norms < 1e-9):
-        raise FileFormatError(f"{where}: a segment has a zero direction")
-    if not (np.isfinite(lengths).all() and (lengths > 0).all()):
-        raise FileFormatError(f"{where}: a segment's 'length' must be a positive number of metres")
     extra = {}
     for key in rows[0]:
         if key not in CORE_FIELDS and all(key in r for r in rows):
             with contextlib.suppress(ValueError, TypeError):
                 extra[key] = np.array([r[key] for r in rows], float)
-    return Segments(frame_id, centers, directions / norms[:, None], lengths, confidence, observations, extra)
+    return checked_segments(Segments(frame_id, centers, directions, lengths, confidence, observations, extra),
+                            where, FileFormatError)
+
+
+def checked_segments(segments: Segments, where: str, error=None) -> Segments:
+    """``segments`` with unit directions, as a model file's are read; ``error`` (default ``InputError``)
+    unless every row has a finite 3-vector centre and non-zero direction, a positive finite length, and
+    the columns agree in length. A model given as ``Segments`` (a library caller's) is checked so too."""
+    error = error or InputError
+    n = len(segments.centers)
+    columns = (segments.directions, segments.lengths, segments.confidence, segments.observations)
+    if any(len(c) != n for c in columns) or np.shape(segments.centers) != (n, 3) or np.shape(segments.directions) != (n, 3):
+        raise error(f"{where}: the segments' columns disagree in length or are not (N, 3) vectors")
+    if not (np.isfinite(segments.centers).all() and np.isfinite(segments.directions).all()):
+        raise error(f"{where}: segments need finite 3-vectors 'center' and 'direction'")
+    norms = np.linalg.norm(segments.directions, axis=1)
+    if np.any(norms < 1e-9):
+        raise error(f"{where}: a segment has a zero direction")
+    if not (np.isfinite(segments.lengths).all() and (segments.lengths > 0).all()):
+        raise error(f"{where}: a segment's 'length' must be a positive number of metres")
+    return replace(segments, directions=segments.directions / norms[:, None])
 
 
 def write_model(target, segments: Segments, **header) -> None:

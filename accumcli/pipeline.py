@@ -10,6 +10,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .accumulate import Accumulator, StepStats, UpdateRule
+from .errors import InputError
 from .extract import ExtractParams, FrameSegments, extract_frame
 from .geometry import inside_box, invert, mean_transform, pose_error, rotate_vectors, transform_points
 from .line_model import FrameContext, LineModelParams, LineSegmentType, direction_known, to_model
@@ -19,6 +20,32 @@ from .segments import Segments
 from .track import PoseEstimate, TrackParams, refine_pose
 
 log = logging.getLogger("accumcli")
+
+
+MOTIONS = ("gripper", "tracked")
+
+
+def check_box(box, form: str = "box ((x_min, x_max), (y_min, y_max), (z_min, z_max)) in metres, object frame",
+              shown=None) -> tuple | None:
+    """``box`` (None, or three (min, max) pairs, metres, object frame) as a tuple of float pairs;
+    ``InputError`` unless each is finite with its minimum below its maximum and the box is at most 10 m
+    across (around an object a gripper holds: more is millimetres, most likely). The message names the
+    ``form`` expected and ``shown`` (default: ``box``) as what was found."""
+    if box is None:
+        return None
+    shown = box if shown is None else shown
+    try:
+        pairs = tuple(tuple(float(v) for v in pair) for pair in box)
+    except (TypeError, ValueError):
+        raise InputError(f"expected {form}, found {shown!r}") from None
+    if len(pairs) != 3 or any(len(pair) != 2 for pair in pairs):
+        raise InputError(f"expected {form}, found {shown!r}")
+    if not all(np.isfinite(lo) and np.isfinite(hi) and lo < hi for lo, hi in pairs):
+        raise InputError(f"expected {form} with each minimum below its maximum, found {shown!r}")
+    across = max(hi - lo for lo, hi in pairs)
+    if across > 10.0:
+        raise InputError(f"expected {form}: a box {across:g} m across, found {shown!r} (millimetres? give metres)")
+    return pairs
 
 
 @dataclass(frozen=True)
@@ -51,6 +78,9 @@ class AccumulateParams:
     box: tuple | None = None          # ((x_min, x_max), (y_min, y_max), (z_min, z_max))
 
     def __post_init__(self):
+        if self.motion not in MOTIONS:
+            raise InputError(f"motion {self.motion!r}: expected one of {', '.join(MOTIONS)}")
+        object.__setattr__(self, "box", check_box(self.box))
         # A segment is expected in a frame only where it could have been extracted there, so the line
         # model's critical angle is always the extraction's (one setting, however the params are built).
         critical = self.extract.stereo.critical_angle_deg

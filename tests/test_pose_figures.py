@@ -26,3 +26,4 @@ def test_pose_figures_judge_only_frames_with_truth(small_recording, tmp_path, ca
     assert figures["median_rotation_deg"] < 1e-6
     assert "3 of 6 frames have no pose in" in caplog.text
     assert "frames_without_truth" not in evaluate_file(str(poses), truth_path)
+

@@ -82,7 +82,12 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
     frames (``plots``); rrd: a Rerun recording; png / panel: pictures of the model and of the last
     frame. All outputs are checked before the work and written together at the end. workers: processes
     extracting the next frames while this one accumulates (``runs.parallel``; the same model bytes
-    whatever the number; None: ``parallel.resolve_workers``).
+    whatever the number; None: ``parallel.resolve_workers``; more than 1 starts them from a fork
+    server, which imports the caller's main module: guard a script's entry point with
+    ``if __name__ == "__main__":``). params: extraction, line model, update rule and motion
+    (``AccumulateParams``); options: topics, frames and time tolerance (``RecordingOptions``);
+    progress: ``Progress``. Raises ``AccumError`` (``InputError`` for bad arguments,
+    ``RecordingError`` for a recording that cannot be used).
     """
     outputs, frames = path_list(outputs, "outputs"), frame_range(frames)
     if ply_all and not any(str(path).lower().endswith(".ply") for path in outputs):

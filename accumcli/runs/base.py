@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import math
+import numbers
 import os
 import re
 from dataclasses import dataclass, field
@@ -23,11 +24,16 @@ from ..recording.tf_tree import OUTSIDE_SAMPLES, OUTSIDE_SAMPLES_PATTERN
 log = logging.getLogger("accumcli")
 
 Progress = Callable[[int, "int | None"], None]
-"""``progress(done, total)``: frames done so far and the frames expected (None when unknown)."""
+"""``progress(done, total)``: the work done so far and the work expected (None when unknown), in frames;
+with ``motion='tracked'`` in frames of its passes, each weighted by what a frame of it costs
+(``runs.accumulation.TRACKED_PASS_COST``: 8 frames count 80), so that done / total is the share done."""
 
 
 def no_progress(done: int, total: int | None) -> None:
     """The default progress callback: says nothing."""
+
+
+MAX_OFFSET_NS = 4 * 10 ** 18   # with a stamp of today (1.75e18 ns), a time moved by this still fits an int64
 
 
 @dataclass(frozen=True)
@@ -40,6 +46,16 @@ class RecordingOptions:
     object_frame: str = "gripper"
     tolerance_ns: int = 1_000_000
     time_offset_ns: int = 0     # poses are looked up this long after an image's stamp (``Recording.pose_at``)
+
+    def __post_init__(self):
+        for name, lowest in (("tolerance_ns", 0), ("time_offset_ns", -MAX_OFFSET_NS)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not lowest <= value <= MAX_OFFSET_NS:
+                raise InputError(f"{name}: expected whole nanoseconds from {lowest} to {MAX_OFFSET_NS}, found {value!r}")
+            object.__setattr__(self, name, int(value))
+        for name in ("camera_frame", "object_frame"):
+            if not isinstance(getattr(self, name), str) or not getattr(self, name):
+                raise InputError(f"{name}: expected a frame name, found {getattr(self, name)!r}")
 
     def open(self, path, require_pose: bool = True) -> Recording:
         """The recording at ``path``; with ``require_pose`` a transform path from the camera
@@ -60,9 +76,14 @@ class FrameRange:
     stop: int | None = None
 
     def __post_init__(self):
-        if not isinstance(self.start, int) or self.start < 0 or (
-                self.stop is not None and (not isinstance(self.stop, int) or self.stop <= self.start)):
+        def whole(x):
+            return isinstance(x, numbers.Integral) and not isinstance(x, bool)
+
+        if not whole(self.start) or self.start < 0 or (
+                self.stop is not None and (not whole(self.stop) or self.stop <= self.start)):
             raise InputError(f"frames {self.start!r}:{self.stop!r}: expected whole numbers 0 <= START < STOP")
+        object.__setattr__(self, "start", int(self.start))   # numpy integers as Python's (JSON, hashing)
+        object.__setattr__(self, "stop", None if self.stop is None else int(self.stop))
 
     @classmethod
     def parse(cls, text: str) -> "FrameRange":

@@ -50,8 +50,9 @@ def extract_recording(recording, output, *, params: ExtractParams = ExtractParam
     2D segments (``segments_2d``: endpoints u0, v0, u1, v1 px, the indices of those that became 3D
     segments, and the critical angle) for the funnel of ``accum eval``. ``rrd``: also a Rerun
     recording. ``workers``: extracting processes (the same bytes whatever the number; None:
-    ``parallel.resolve_workers``). Needs no
-    object pose."""
+    ``parallel.resolve_workers``; more than 1: guard a script's entry point, ``accumulate_recording``).
+    ``params``: ``ExtractParams``; ``options``: ``RecordingOptions``; ``progress``: ``Progress``. Needs no
+    object pose. Raises ``AccumError`` (``InputError``, ``RecordingError``)."""
     given = path_list(output, "output")
     if len(given) != 1:
         raise InputError(f"output: expected one frames file, found {len(given)}")

@@ -13,7 +13,7 @@ from ..errors import AccumError, InputError
 from ..extract import ExtractParams, extract_frame
 from ..geometry import check_transform
 from ..lines2d import frame_gradients
-from ..model_io import PoseTrack, read_model, write_poses, write_poses_mcap
+from ..model_io import PoseTrack, checked_segments, read_model, write_poses, write_poses_mcap
 from ..outputs import OutputSet
 from ..segments import Segments
 from ..track import PoseEstimate, PoseTracker, TrackParams
@@ -67,7 +67,13 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
     tracked poses for evo) and/or ``.mcap`` (the tracked poses as FrameTransforms on
     ``poses_topic``, child frame ``poses_child_frame``, default ``<object>_tracked``, so they sit
     beside the recording's own /tf in Foxglove). ``object_frame_of_model``: the object's frame is the
-    one the model names (``options.object_frame`` is not the user's choice but a default).
+    one the model names (``options.object_frame`` is not the user's choice but a default). ``frames``:
+    the stereo frames tracked (``FrameRange``); ``params``: ``TrackParams``; ``extract_params``: the
+    extraction whose 3D segments re-acquisition matches the model to (``reacquire``: after a frame is
+    lost, search the whole frame that way; False: only from the last pose); ``rrd``: also a Rerun
+    recording of the images, the model at each pose and the statuses; ``progress``: ``Progress``.
+    A ``Segments`` model is checked as a model file is (unit directions, positive lengths). Raises
+    ``AccumError`` (``InputError``, ``RecordingError``).
     """
     outputs, frames = path_list(outputs, "outputs"), frame_range(frames)
     for name, value in (("poses_topic", poses_topic), ("poses_child_frame", poses_child_frame)):
@@ -79,7 +85,7 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
     if model_file is not None:
         model_path, model = model, read_model(model)
     else:
-        model_path = "the model"
+        model_path, model = "the model", checked_segments(model, "the model")
     if not model.accepted.any():
         raise AccumError(f"{model_path}: the model has no accepted segment (confidence >= 0.5) to track")
     if object_frame_of_model and model.frame_id and model.frame_id != options.object_frame:
