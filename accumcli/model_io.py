@@ -38,7 +38,7 @@ TRACKED_SUFFIX = "_tracked"
 # file_kind results and how messages name them
 KIND_NAMES = {"model": f"a model JSON ({MODEL_FORMAT})", "frames": f"a frames JSONL file ({MODEL_FORMAT} lines)",
               "poses": f"a poses JSON ({POSES_FORMAT})", "truth": f"a truth JSON ({TRUTH_FORMAT})",
-              "ply": "a PLY file", "recording": "a recording (MCAP or rosbag2)", "json": "a JSON file of another kind",
+              "ply": "a PLY file", "recording": "a recording (MCAP, rosbag2 or ROS 1 bag)", "json": "a JSON file of another kind",
               "text": "a text file", "binary": "a binary file", "empty": "an empty file"}
 SNIFF_BYTES = 65536
 
@@ -122,13 +122,14 @@ def _is_text(head: bytes) -> bool:
 
 def _sniff(path) -> tuple[str, str | None]:
     """(kind, the format tag if a JSON file has one). A recording is an MCAP file, a rosbag2
-    ``.db3`` (SQLite) file or a rosbag2 folder (with its metadata.yaml)."""
+    ``.db3`` (SQLite) file, a rosbag2 folder (with its metadata.yaml) or a ROS 1 ``.bag``, by the
+    magic bytes ``recording.ros2.bag_kind`` reads too."""
     if os.path.isdir(path) and os.path.isfile(os.path.join(path, "metadata.yaml")):
         return "recording", None
     head = _head(path)
     if not head.strip():
         return "empty", None
-    if head.startswith((b"\x89MCAP", b"SQLite format 3\0")):
+    if head.startswith((b"\x89MCAP", b"SQLite format 3\0", b"#ROSBAG V2.0\n")):
         return "recording", None
     if head.startswith((b"ply\n", b"ply\r\n")):
         return "ply", None

@@ -267,7 +267,7 @@ def test_file_kind_of_long_and_pretty_files(tmp_path, files):
 
 @pytest.mark.parametrize("reader, given, message", [
     (read_model, "ply", r"ply\.json: expected a model JSON \(accum\.model/1\), got a PLY file$"),
-    (read_model, "recording", r"expected a model JSON \(accum\.model/1\), got a recording \(MCAP or rosbag2\)$"),
+    (read_model, "recording", r"expected a model JSON \(accum\.model/1\), got a recording \(MCAP, rosbag2 or ROS 1 bag\)$"),
     (read_model, "frames", r"expected a model JSON \(accum\.model/1\), got a frames JSONL file"),
     (read_model, "binary", r"got a binary file$"),
     (read_model, "latin-1", r"got a binary file$"),

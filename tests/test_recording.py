@@ -528,3 +528,57 @@ def test_foxglove_json_recordings_read_as_protobuf_ones(tmp_path):
         from_foxglove_json(RawImage, b'{"width": "wide"}')
     stamp = from_foxglove_json(RawImage, b'{"timestamp": {"sec": 3, "nsec": 5}, "data": "AAE="}')
     assert (stamp.timestamp.seconds, stamp.timestamp.nanos, stamp.data) == (3, 5, b"\x00\x01")
+    for time, expected in (('{"sec": 1750000000.25}', (1750000000, 250000000)),   # float seconds: not cut
+                           ('{"sec": 3, "nsec": 1500000000}', (4, 500000000))):   # nsec carried
+        stamp = from_foxglove_json(RawImage, f'{{"timestamp": {time}}}'.encode()).timestamp
+        assert (stamp.seconds, stamp.nanos) == expected
+    with pytest.raises(ValueError, match="must be numbers"):
+        from_foxglove_json(RawImage, b'{"timestamp": {"sec": "3"}}')
+
+
+def test_a_damaged_jpeg_is_refused_and_extraneous_bytes_are_not():
+    """libjpeg returns a damaged JPEG filled grey and only says so on stderr: such a frame is a DecodeError (it was
+    used, silently); its note of extraneous bytes before a marker (many cameras' JPEGs) loses no pixel."""
+    from accumcli.recording.messages import DecodeError
+
+    grey = cv2.GaussianBlur(helpers.image(1, 320, 240), (0, 0), 2)
+    data = bytearray(cv2.imencode(".jpg", grey)[1].tobytes())
+    extraneous = CompressedImage(format="jpeg", data=bytes(data[:-2]) + b"\0\0\0\xff\xd9")
+    assert np.abs(decode_image(extraneous).astype(int) - grey).mean() < 3
+    data[len(data) // 2:len(data) // 2 + 50] = b"\0" * 50
+    with pytest.raises(DecodeError, match="damaged jpeg image data .*premature end of data segment"):
+        decode_image(CompressedImage(format="jpeg", data=bytes(data)))
+
+
+def test_a_compressed_depth_topic_is_refused_when_the_recording_opens(tmp_path):
+    path = tmp_path / "depth.mcap"
+    with RecordingWriter(path) as w:
+        for side in ("left", "right"):
+            w.calibration(f"/stereo/{side}/calibration", helpers.calibration(side), helpers.T0)
+            msg = image_to_msg(helpers.image(0), helpers.T0, f"camera_{side}", "png")
+            msg.format = "16UC1; compressedDepth png"
+            w.message(f"/stereo/{side}/image", msg, helpers.T0)
+        w.raw_transform("camera_left", "gripper", (0.0, 0.0, 0.5), (0, 0, 0, 1), helpers.T0)
+    with pytest.raises(RecordingError, match="/stereo/left/image: image format '16UC1; compressedDepth png' is a "
+                                             "compressed depth image"):
+        Recording(path)
+
+
+def test_frame_names_with_a_leading_slash_are_tf2s(tmp_path):
+    """ROS 1's tf wrote '/camera_left'; tf2 strips the slash: either spelling, in the tree or in the options,
+    names one frame (the tree's '/gripper' needed --object-frame /gripper, and eval then refused its truth)."""
+    from accumcli.runs import RecordingOptions
+
+    path = tmp_path / "slash.mcap"
+    with RecordingWriter(path) as w:
+        for side in ("left", "right"):
+            w.calibration(f"/stereo/{side}/calibration", helpers.calibration(side), helpers.T0)
+        for i in range(3):
+            t = helpers.T0 + i * helpers.PERIOD
+            w.raw_transform("/camera_left", "/gripper", (0.01 * i, 0.0, 0.5), (0, 0, 0, 1), t)
+            for side in ("left", "right"):
+                w.image(f"/stereo/{side}/image", helpers.image(i), t, f"/camera_{side}")
+    for object_frame in ("gripper", "/gripper"):
+        with RecordingOptions(object_frame=object_frame).open(path) as rec:
+            assert [f.T_camera_object[0, 3] for f in rec.frames()] == pytest.approx([0.0, 0.01, 0.02])
+    assert RecordingOptions(object_frame="/board").object_frame == "board"

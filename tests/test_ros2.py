@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from accumcli.errors import RecordingError
+from accumcli.model_io import file_kind
 from accumcli.recording import Recording, RecordingWriter, Rosbag2Writer, Topics
 from accumcli.recording.mcap_records import _Channel
 from accumcli.recording.messages import calibration_from_msg, decode_image
@@ -406,6 +407,7 @@ def test_ros1_recordings_give_the_protobuf_recordings_model(small_recording, tmp
     summary, problem = describe_recording(str(path))
     assert problem is None and summary.stereo_frames == 6 and summary.frames_with_pose == 6
     assert {schema for _, schema, _ in summary.topics} >= {ROS_CAMERA_INFO, "tf2_msgs/msg/TFMessage"}
+    assert file_kind(path) == "recording"   # view took a .bag for "a binary file"
 
 
 def test_a_ros1_bag_cut_short_asks_for_reindex(small_recording, tmp_path):

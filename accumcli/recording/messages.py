@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import atexit
 import json
+import math
 import os
 import struct
 import tempfile
@@ -54,8 +55,12 @@ SIXTEEN_BIT = tuple(name for name, (_, dtype, _) in RAW_ENCODINGS.items() if dty
 
 
 def encoding_problem(msg) -> str | None:
-    """Why a raw image's encoding cannot be read (for an error when the recording opens: every
-    frame would fail alike), or None: a compressed image, or an encoding of ``RAW_ENCODINGS``."""
+    """Why an image's encoding cannot be read (for an error when the recording opens: every frame would
+    fail alike), or None: a compressed image (but a compressedDepth one), or a raw image in an encoding of
+    ``RAW_ENCODINGS``."""
+    if "compresseddepth" in getattr(msg, "format", "").lower():
+        return (f"image format {msg.format!r} is a compressed depth image (ROS compressedDepth); accum needs the "
+                "cameras' intensity images: choose their topics")
     encoding = getattr(msg, "encoding", None)
     if encoding is None or encoding in RAW_ENCODINGS:
         return None
@@ -200,10 +205,12 @@ def decode_image(msg, expected_size: tuple[int, int] | None = None, full_scale: 
                 image = cv2.imdecode(buffer, cv2.IMREAD_UNCHANGED)
             except cv2.error:
                 image = None
+        said = " ".join(captured.text.split())[:200]
         if image is None:
-            said = " ".join(captured.text.split())[:200]
             raise DecodeError(f"cannot decode {msg.format or 'compressed'} image bytes ({len(msg.data)} bytes)"
                               + (f": {said}" if said else ""))
+        if _damaged(said):   # libjpeg decodes what it can and fills the rest grey: edges that are not there
+            raise DecodeError(f"damaged {msg.format or 'compressed'} image data ({said})")
         if image.shape[1] != width or image.shape[0] != height:
             raise DecodeError(f"decoded image is {image.shape[1]}x{image.shape[0]}, its header said {width}x{height}")
         source = msg.format.split(";")[0].strip()   # ROS image_transport: "bayer_rggb8; png compressed "
@@ -229,6 +236,14 @@ def decode_image(msg, expected_size: tuple[int, int] | None = None, full_scale: 
     if image.dtype == np.uint16:
         image = cv2.convertScaleAbs(image, alpha=255.0 / full_scale)
     return np.ascontiguousarray(image, dtype=np.uint8)
+
+
+def _damaged(codec_said: str) -> bool:
+    """A codec's warning that the image it still returned is partly made up: libjpeg's corrupt or cut
+    data (filled grey from there on); not its note of extraneous bytes before a marker, which many
+    cameras' JPEGs carry and which loses no pixel."""
+    said = codec_said.lower()
+    return "premature end" in said or ("corrupt jpeg data" in said and "extraneous bytes" not in said)
 
 
 def _to_grey(image: np.ndarray, code: int, msg) -> np.ndarray:
@@ -257,10 +272,24 @@ def from_foxglove_json(cls, data):
 
 
 def _times_as_text(value):
-    """``value`` with every Foxglove time object ({"sec": s, "nsec": n}) as protobuf's RFC 3339 text."""
+    """``value`` with every Foxglove time object ({"sec": s, "nsec": n}) as protobuf's RFC 3339 text.
+    A fractional ``sec`` (some writers' float seconds) keeps its fraction (as exactly as the float
+    holds it: 0.1 us at today's times), and ``nsec`` beyond a second carries into ``sec``: cut to whole seconds, consecutive frames
+    shared a stamp and were dropped."""
     if isinstance(value, dict):
         if value and set(value) <= {"sec", "nsec"}:
-            return Timestamp(seconds=int(value.get("sec", 0)), nanos=int(value.get("nsec", 0))).ToJsonString()
+            sec, nsec = value.get("sec", 0), value.get("nsec", 0)
+            if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in (sec, nsec)):
+                raise ValueError(f"a time's sec and nsec must be numbers, found {value!r}")
+            if isinstance(sec, int) and isinstance(nsec, int):
+                total = sec * 1_000_000_000 + nsec
+            elif math.isfinite(sec) and math.isfinite(nsec):   # the fraction alone times 1e9: exact to 1 ns
+                whole = math.floor(sec)
+                total = int(whole) * 1_000_000_000 + round((sec - whole) * 1e9) + round(nsec)
+            else:
+                raise ValueError(f"a time's sec and nsec must be finite, found {value!r}")
+            seconds, nanos = divmod(total, 1_000_000_000)
+            return Timestamp(seconds=seconds, nanos=nanos).ToJsonString()
         return {k: _times_as_text(v) for k, v in value.items()}
     if isinstance(value, list):
         return [_times_as_text(v) for v in value]

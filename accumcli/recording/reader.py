@@ -91,7 +91,7 @@ from .messages import (
     sixteen_bit_full_scale,
     stamp_ns,
 )
-from .tf_tree import TransformTree, sample_problem
+from .tf_tree import TransformTree, frame_name, sample_problem
 
 log = logging.getLogger("accumcli")
 
@@ -274,8 +274,8 @@ class Recording:
         self.path = str(path)
         self.time_offset_ns = int(time_offset_ns)   # poses are looked up this long after an image's stamp
         self.topics = topics
-        self.camera_frame = camera_frame
-        self.object_frame = object_frame
+        self.camera_frame = frame_name(camera_frame)
+        self.object_frame = frame_name(object_frame)
         self.tolerance_ns = int(tolerance_ns)
         self._check_file()
         self.tree = TransformTree()
@@ -416,7 +416,7 @@ class Recording:
                     if not msg.HasField("timestamp"):
                         unstamped[topic] = unstamped.get(topic, 0) + 1
                     if topic == t.left_image and not self.image_frame_id:
-                        self.image_frame_id = getattr(msg, "frame_id", "") or ""
+                        self.image_frame_id = frame_name(getattr(msg, "frame_id", "") or "")
                     if t_ns is not None:
                         self.frame_count_hint += len(pairing.add(topic, _PendingImage(t_ns, None)))
                         span = self.time_span_ns or (t_ns, t_ns)
@@ -486,7 +486,8 @@ class Recording:
         for topic in (t.left_image, t.right_image, t.left_calibration, t.right_calibration):
             if topic not in self._channels:
                 proposal = ros2.propose_topics(self._channels)
-                hint = f"; this recording looks like ROS 2: try {proposal}" if proposal else ""
+                hint = (f"; this recording looks like ROS {1 if self.bag == 'rosbag1' else 2}: try {proposal}"
+                        if proposal else "")
                 if not proposal:
                     proposal = ros2.propose_topics(self._channels, tuple(IMAGE_TYPES), tuple(CALIBRATION_TYPES),
                                                    "foxglove.RawImage")
@@ -502,7 +503,7 @@ class Recording:
             raise self._fail(f"missing topic {t.tf}: no transforms, so no pose of {self.object_frame!r} "
                              f"(topics found: {available})")
         for topic in (t.left_image, t.right_image):
-            if not self.message_counts.get(self._channels[topic].id, 0):
+            if not self._message_count(topic):
                 raise self._fail(f"no readable image on {topic}{self._lost()}")
         if self.frame_count_hint == 0:
             if self.stereo_offset_ns is None:
@@ -547,9 +548,9 @@ class Recording:
         if others:
             return f"; the recording has {others[0]}: try --tf-static-topic {others[0]}"
         channel = self._channels.get(static)
-        if channel is None or not self.message_counts.get(channel.id, 0):
+        if channel is None or not self._message_count(static):
             return (f"; {static} has no message here (a split bag records it in its first file only: give the "
-                    "bag's folder)")
+                    + ("files merged into one" if self.bag == "rosbag1" else "bag's folder") + ")")
         return ""
 
     def _check_image_frame(self) -> None:
@@ -669,13 +670,18 @@ class Recording:
                 yield StereoFrame(index, t_ns, left, right, rectifier.intrinsics, T, problem, rectifier.border_distance)
 
     # -- summary --------------------------------------------------------------------------
+    def _message_count(self, topic: str) -> int:
+        """Messages on ``topic`` over all its channels (a ROS 1 bag has one per publisher: two /tf
+        broadcasters, a restarted driver)."""
+        return sum(self.message_counts.get(c.id, 0) for c in self._channels_seen.values() if c.topic == topic)
+
     def info(self) -> RecordingInfo:
         """Scan the recording (no pixel decoding) for ``accum info``."""
         info = RecordingInfo(path=self.path, stereo_offset_ms=None if self.stereo_offset_ns is None
                              else self.stereo_offset_ns * 1e-6, pairing_tolerance_ms=self.pairing_tolerance_ms,
                              lost_bytes=self.lost_bytes)
         for channel in sorted(self._channels.values(), key=lambda c: c.topic):
-            info.topics.append((channel.topic, channel.schema_name, self.message_counts.get(channel.id, 0)))
+            info.topics.append((channel.topic, channel.schema_name, self._message_count(channel.topic)))
         info.tf_frames = sorted(self.tree.frames)
         info.calibrations = len(self.calibrations["left"])
         info.unpaired_images = self.unpaired_count

@@ -145,6 +145,12 @@ class TransformSamples:
         return transform_from_quat(self.translations[i], self.quats_xyzw[i])
 
 
+def frame_name(name: str) -> str:
+    """A frame's name as tf2 keys it: without a leading '/' (ROS 1's tf wrote '/base_link'; tf2 strips it, so
+    '/camera_left' and 'camera_left' are one frame)."""
+    return name[1:] if isinstance(name, str) and name.startswith("/") else name
+
+
 @dataclass
 class TransformTree:
     """Collects transform samples, then answers ``lookup(target, source, t)``."""
@@ -154,7 +160,9 @@ class TransformTree:
     edges: dict = field(default_factory=dict)
 
     def add(self, parent: str, child: str, t_ns: int, translation, quat_xyzw, static: bool = False) -> None:
-        """Record one sample of ``T_parent_child`` (translation metres, quaternion xyzw, time int ns)."""
+        """Record one sample of ``T_parent_child`` (translation metres, quaternion xyzw, time int ns);
+        frame names as ``frame_name`` makes them."""
+        parent, child = frame_name(parent), frame_name(child)
         self._raw[(parent, child)].append((int(t_ns), *translation, *quat_xyzw))
         if static:
             self._static_pairs.add((parent, child))
@@ -190,6 +198,7 @@ class TransformTree:
         ``forward`` means the edge is traversed parent -> child, i.e. it
         contributes ``T_parent_child`` to ``T_target_source``.
         """
+        target, source = frame_name(target), frame_name(source)
         neighbours = defaultdict(list)
         for parent, child in self._raw:
             neighbours[parent].append((child, (parent, child), True))

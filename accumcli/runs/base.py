@@ -19,7 +19,7 @@ from typing import Callable
 
 from ..errors import AccumError, InputError
 from ..recording import Recording, Topics
-from ..recording.tf_tree import OUTSIDE_SAMPLES, OUTSIDE_SAMPLES_PATTERN
+from ..recording.tf_tree import OUTSIDE_SAMPLES, OUTSIDE_SAMPLES_PATTERN, frame_name
 
 log = logging.getLogger("accumcli")
 
@@ -54,8 +54,9 @@ class RecordingOptions:
                 raise InputError(f"{name}: expected whole nanoseconds from {lowest} to {MAX_OFFSET_NS}, found {value!r}")
             object.__setattr__(self, name, int(value))
         for name in ("camera_frame", "object_frame"):
-            if not isinstance(getattr(self, name), str) or not getattr(self, name):
+            if not isinstance(getattr(self, name), str) or not frame_name(getattr(self, name)):
                 raise InputError(f"{name}: expected a frame name, found {getattr(self, name)!r}")
+            object.__setattr__(self, name, frame_name(getattr(self, name)))   # '/board' is tf2's 'board'
 
     def open(self, path, require_pose: bool = True) -> Recording:
         """The recording at ``path``; with ``require_pose`` a transform path from the camera

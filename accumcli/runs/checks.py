@@ -8,6 +8,7 @@ import numpy as np
 
 from ..errors import AccumError
 from ..geometry import pose_error
+from ..recording.tf_tree import frame_name
 
 # recorded poses this far from a truth's (medians) are of another recording: the devset's five truths
 # lie 19 to 50 deg and 46 to 251 mm apart by their medians, noisy gripper poses 1.5 deg / 4 mm
@@ -18,7 +19,7 @@ MAX_POSE_GAP_M = 0.03
 def check_truth_matches(truth, object_frame: str, truth_path, what: str = "the model") -> None:
     """The truth must describe ``object_frame``, the frame of ``what`` ("the model", "the poses",
     "the run": the only one that takes --object-frame); a truth that names no frame is taken as given."""
-    if truth.object_frame and object_frame and truth.object_frame != object_frame:
+    if truth.object_frame and object_frame and frame_name(truth.object_frame) != frame_name(object_frame):
         fix = (f"or --object-frame {truth.object_frame}" if what == "the run" else
                f"or {what} of a run with --object-frame {truth.object_frame}")
         raise AccumError(f"{truth_path}: the truth is of object frame {truth.object_frame!r}, {what} of "
