@@ -51,7 +51,10 @@ class BatchOptions:
 
 
 def _inputs_stamp(recording: Path, options: BatchOptions) -> dict:
+    """Size and modification time of every input file (a rosbag2 folder's files one by one: rewriting a
+    bag file in place leaves the folder's own stamp as it was)."""
     paths = [recording] + ([_sidecar(recording)] if options.truth_from_sidecar else [])
+    paths = [f for p in paths for f in (sorted(p.iterdir()) if p.is_dir() else [p])]
     files = {str(p): [p.stat().st_size, p.stat().st_mtime_ns] if p.exists() else None for p in paths}
     return {"inputs": files, "options": options.fingerprint()}
 

@@ -122,3 +122,17 @@ def test_the_truth_sidecar_of_a_dotted_rosbag2_folder_keeps_its_whole_name(tmp_p
 
     (tmp_path / "run.2").mkdir()
     assert _sidecar(tmp_path / "run.2") == tmp_path / "run.2.truth.json"
+
+
+def test_a_bag_folder_rewritten_in_place_is_not_up_to_date(tmp_path):
+    """A rosbag2 folder's stamp is its files' (a bag file rewritten in place left the folder's own size and
+    time as they were, and batch skipped it as up to date)."""
+    from accumcli.batch import _inputs_stamp
+
+    bag = tmp_path / "run"
+    bag.mkdir()
+    (bag / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    (bag / "run_0.db3").write_bytes(b"first")
+    before = _inputs_stamp(bag, OPTIONS)
+    (bag / "run_0.db3").write_bytes(b"second, longer")
+    assert _inputs_stamp(bag, OPTIONS) != before

@@ -331,18 +331,22 @@ class _Ros1BagWriter:
     messages ``convert_to_ros2`` gives: the same fields, CameraInfo's d, k, r, p as D, K, R, P, headers with
     a seq."""
 
-    def __init__(self, path):
+    def __init__(self, path, **writer_options):
         from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
         self.store = get_typestore(Stores.ROS1_NOETIC)
         self.store.register(get_types_from_msg(TF2_MSG, "tf2_msgs/msg/TFMessage"))
         self.connections = {}
-        self._open(path)
+        self._open(path, **writer_options)
 
-    def _open(self, path):
+    def _open(self, path, compression=None, chunk_bytes=None):
         from rosbags.rosbag1 import Writer
 
         self.writer = Writer(path)
+        if compression:
+            self.writer.set_compression(Writer.CompressionFormat[compression])
+        if chunk_bytes:
+            self.writer.chunk_threshold = chunk_bytes
         self.writer.open()
 
     def _ros1(self, value, msgtype):
@@ -419,3 +423,34 @@ def test_a_ros1_bag_cut_short_asks_for_reindex(small_recording, tmp_path):
     cut.write_bytes(bag.read_bytes()[:len(bag.read_bytes()) * 2 // 3])
     with pytest.raises(RecordingError, match="cannot be read as a ROS 1 bag .*needs 'rosbag reindex' first"):
         Recording(cut)
+
+
+def test_a_damaged_ros1_bag_is_read_up_to_the_damage(small_recording, tmp_path, caplog):
+    """A bad compressed chunk in the middle of a ROS 1 bag: the frames before it are read, one warning says
+    where the damage began (the whole bag was refused)."""
+    bag = tmp_path / "run.bag"
+    writer = _Ros1BagWriter(bag, compression="BZ2", chunk_bytes=100_000)
+    convert_to_ros2(small_recording, writer)
+    writer.close()
+    data = bytearray(bag.read_bytes())
+    middle = len(data) // 2
+    data[middle:middle + 64] = bytes(b ^ 0x5A for b in data[middle:middle + 64])
+    damaged = tmp_path / "damaged.bag"
+    damaged.write_bytes(bytes(data))
+    with caplog.at_level("WARNING", logger="accumcli"), Recording(damaged) as rec:
+        read = len(list(rec.frames()))
+    assert 0 < read < 6
+    assert "damaged bag" in caplog.text and "the rest is lost" in caplog.text
+
+
+def test_a_message_compressed_bag_file_and_a_killed_bag_folder_say_what_to_give(tmp_path):
+    text = typestore().generate_msgdef(ROS_IMAGE, ros_version=2)[0].encode()
+    decode = mcap_cdr_decoder(_Channel(1, ROS_IMAGE, "/t", "cdr", 1, "ros2msg", text))
+    with pytest.raises(ValueError, match="zstd-compressed .*give the bag's folder"):
+        decode(memoryview(b"\x28\xb5\x2f\xfd" + bytes(20)))
+    killed = tmp_path / "killed"
+    killed.mkdir()
+    (killed / "run_0.db3").write_bytes(b"SQLite format 3\x00")
+    with pytest.raises(RecordingError, match="holding run_0.db3: a rosbag2 recording that was killed leaves none: "
+                                             "run 'ros2 bag reindex"):
+        Recording(killed)

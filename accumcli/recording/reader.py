@@ -256,6 +256,22 @@ class _Pairing:
         return math.floor(float(np.percentile(offsets, 98)) * 1e-6) + 1
 
 
+def _folder_problem(path: str) -> str:
+    """What to do with a folder that is not a rosbag2 bag (no metadata.yaml): name the files in it that are."""
+    try:
+        names = sorted(os.listdir(path))
+    except OSError as e:
+        return f"a folder that cannot be listed ({e.strerror or e})"
+    storage = [n for n in names if n.endswith((".db3", ".mcap"))]
+    bags = [n for n in names if n.endswith(".bag")]
+    if storage:
+        return (f"a folder without metadata.yaml, holding {', '.join(storage[:3])}: a rosbag2 recording that was "
+                f"killed leaves none: run 'ros2 bag reindex {path}', or give {storage[0]} itself")
+    if bags:
+        return f"a folder without metadata.yaml, holding {', '.join(bags[:3])}: give one .bag file"
+    return "a directory without metadata.yaml (neither an MCAP file nor a rosbag2 folder)"
+
+
 class Recording:
     """A stereo recording opened for streaming. Use as a context manager.
 
@@ -309,7 +325,7 @@ class Recording:
             self.size, self.truncated = 0, False
             return
         if not os.path.isfile(self.path):
-            raise self._fail("a directory without metadata.yaml (neither an MCAP file nor a rosbag2 folder)")
+            raise self._fail(_folder_problem(self.path))
         self.size = os.path.getsize(self.path)
         if self.size == 0:
             raise self._fail("empty file")
@@ -470,7 +486,11 @@ class Recording:
             how = "truncated" if self.truncated else "corrupt"
             raise self._fail(f"{how} MCAP file: no readable channel in its {self.size} bytes"
                              + (f" ({scan.broken})" if scan.broken else ""))
-        if not scan.footer:
+        if not scan.footer and self.bag:
+            last = f"{scan.last_time_ns * 1e-9:.3f} s" if scan.last_time_ns is not None else "none"
+            log.warning("%s: damaged bag (%s): read up to its last message before the damage, at %s; the rest "
+                        "is lost", self.path, scan.broken, last)
+        elif not scan.footer:
             last = f"{scan.last_time_ns * 1e-9:.3f} s" if scan.last_time_ns is not None else "none"
             what = "truncated recording (no MCAP footer)" if self.truncated else f"damaged recording ({scan.broken})"
             log.warning("%s: %s: read up to byte %d of %d, %d bytes lost; last message read at %s", self.path,

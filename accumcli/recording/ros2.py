@@ -120,7 +120,20 @@ def mcap_cdr_decoder(channel: _Channel) -> Callable[[memoryview], object]:
     if decode is None:
         raise ValueError("no CDR decoder for its schema")
     convert = CONVERTERS[channel.schema_name]
-    return lambda data: convert(decode(bytes(data)))
+    return lambda data: convert(decode(_uncompressed(data)))
+
+
+ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
+
+
+def _uncompressed(data) -> bytes:
+    """A CDR message's bytes; ValueError naming the cause for a zstd frame (a rosbag2 bag's file with
+    message compression, given without its folder, whose metadata.yaml says so)."""
+    data = bytes(data)
+    if data[:4] == ZSTD_MAGIC:
+        raise ValueError("the message is zstd-compressed (a rosbag2 bag with message compression): give the "
+                         "bag's folder")
+    return data
 
 
 _TYPESTORE = None
@@ -196,9 +209,8 @@ class RosbagScan:
                 for c, timestamp, data in reader.messages():
                     self.last_time_ns = timestamp
                     yield _Message(c.id, int(timestamp), memoryview(data))
-            except Exception as e:
-                raise RecordingError(f"{self.path}: {self.name} damaged after {self.last_time_ns or 0} ns "
-                                     f"({type(e).__name__}: {_one_line(e)})") from None
+            except Exception as e:   # read up to the damage, as an MCAP file is (the reader warns)
+                self.footer, self.broken = False, f"{type(e).__name__}: {_one_line(e)}"
         finally:
             reader.close()
 
