@@ -12,6 +12,7 @@ import pytest
 
 from accumcli.errors import RecordingError
 from accumcli.model_io import file_kind
+from accumcli.extract import ExtractParams
 from accumcli.recording import Recording, RecordingWriter, Rosbag2Writer, Topics
 from accumcli.recording.mcap_records import _Channel
 from accumcli.recording.messages import calibration_from_msg, decode_image
@@ -454,3 +455,48 @@ def test_a_message_compressed_bag_file_and_a_killed_bag_folder_say_what_to_give(
     with pytest.raises(RecordingError, match="holding run_0.db3: a rosbag2 recording that was killed leaves none: "
                                              "run 'ros2 bag reindex"):
         Recording(killed)
+
+
+class _BinnedCropped:
+    """A ROS 2 writer passing on ``convert_to_ros2``'s messages with every image cut to the sensor region
+    ``offset``/``size`` and binned by ``binning`` (averaged), its CameraInfo saying so (K, P and size kept
+    as the full sensor's, REP 104)."""
+
+    def __init__(self, writer, binning, offset, size):
+        self.writer, self.binning, self.offset, self.size = writer, binning, offset, size
+
+    def ros_message(self, topic, message, log_time):
+        m = message.message
+        (x0, y0), (w, h), b = self.offset, self.size, self.binning
+        if message.msgtype == ROS_CAMERA_INFO:
+            m.binning_x = m.binning_y = b
+            m.roi.x_offset, m.roi.y_offset, m.roi.width, m.roi.height = x0, y0, w, h
+        elif message.msgtype == "sensor_msgs/msg/CompressedImage":
+            image = cv2.imdecode(np.frombuffer(bytes(m.data), np.uint8), cv2.IMREAD_GRAYSCALE)[y0:y0 + h, x0:x0 + w]
+            image = image.reshape(h // b, b, w // b, b).mean(axis=(1, 3)).round().astype(np.uint8)
+            m.format, m.data = "png", np.frombuffer(cv2.imencode(".png", image)[1].tobytes(), np.uint8)
+        self.writer.ros_message(topic, message, log_time)
+
+
+def test_binned_and_cropped_images_use_their_reduced_calibration(raw_recording, tmp_path):
+    """A camera publishing a region of its sensor, binned (CameraInfo binning and roi set, K and P the full
+    sensor's; raw, distorted images): the frames' intrinsics are those of the images published, and a frame's
+    3D segments lie where the full images put them (the images' size disagreed with the calibration: every
+    frame refused)."""
+    from accumcli.evaluate import _point_edge_distance
+    from accumcli.extract import extract_frame
+
+    path = tmp_path / "binned.mcap"
+    with RecordingWriter(path, ros2=True) as w:
+        convert_to_ros2(raw_recording, _BinnedCropped(w, 2, (80, 60), (480, 360)))
+    with Recording(raw_recording) as full, Recording(path) as reduced:
+        a, b = next(iter(full.frames(2, 3))), next(iter(reduced.frames(2, 3)))
+    assert b.left.shape == (180, 240)
+    assert b.intrinsics.fx == pytest.approx(a.intrinsics.fx / 2)
+    assert b.intrinsics.cx == pytest.approx((a.intrinsics.cx - 80 - 0.5) / 2)
+    assert b.intrinsics.baseline == pytest.approx(a.intrinsics.baseline)
+    ours = extract_frame(b, ExtractParams(), "camera_left").segments
+    theirs = extract_frame(a, ExtractParams(), "camera_left").segments
+    ends = theirs.endpoints()
+    off = _point_edge_distance(ours.centers, ends[:, 0], ends[:, 1]).min(axis=1)
+    assert len(ours) > 20 and np.median(off) < 0.002   # metres: the same edges, at half the resolution

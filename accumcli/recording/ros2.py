@@ -9,7 +9,8 @@ Conversions (ROS 2 message -> Foxglove protobuf message):
   recording opens (``messages.encoding_problem``).
 - ``sensor_msgs/msg/CompressedImage`` -> ``foxglove.CompressedImage`` (format, data; PNG or JPEG by
   signature, as for protobuf).
-- ``sensor_msgs/msg/CameraInfo`` -> ``foxglove.CameraCalibration``: d, k, r, p to D, K, R, P;
+- ``sensor_msgs/msg/CameraInfo`` -> ``foxglove.CameraCalibration``: d, k, r, p to D, K, R, P (K, P and
+  the size those of the binned, cropped images where binning or a region of interest is set);
   distortion_model as written (``calibration`` takes plumb_bob, rational_polynomial and the fisheye
   model, equidistant, and refuses others with a ``RecordingError``).
 - ``tf2_msgs/msg/TFMessage`` -> ``foxglove.FrameTransforms``: header.frame_id is the parent.
@@ -79,11 +80,39 @@ def compressed_from_ros(m) -> CompressedImage:
 
 
 def calibration_from_ros(m) -> CalibrationMsg:
+    """CameraInfo -> CameraCalibration of the images published: with binning or a region of interest
+    (REP 104: K, P, width and height are the full sensor's) those of the binned, cropped images
+    (``_reduced``); ROS 1's D, K, R, P as ROS 2's d, k, r, p."""
     d, k, r, p = (getattr(m, name) if hasattr(m, name) else getattr(m, name.upper()) for name in "dkrp")  # ROS 1: D...
+    width, height, K, P = int(m.width), int(m.height), np.array(k, float), np.array(p, float)
+    binning = (max(int(getattr(m, "binning_x", 0)), 1), max(int(getattr(m, "binning_y", 0)), 1))
+    roi = getattr(m, "roi", None)
+    offset = (int(roi.x_offset), int(roi.y_offset)) if roi is not None else (0, 0)
+    size = (int(roi.width), int(roi.height)) if roi is not None else (0, 0)
+    if binning != (1, 1) or any(offset) or any(size):
+        width, height, K, P = _reduced(width, height, K, P, binning, offset, size)
     return _with_stamp(CalibrationMsg(
-        frame_id=m.header.frame_id, width=int(m.width), height=int(m.height),
-        distortion_model=str(m.distortion_model), D=[float(v) for v in d], K=[float(v) for v in k],
-        R=[float(v) for v in r], P=[float(v) for v in p]), m.header)
+        frame_id=m.header.frame_id, width=width, height=height,
+        distortion_model=str(m.distortion_model), D=[float(v) for v in d], K=[float(v) for v in K],
+        R=[float(v) for v in r], P=[float(v) for v in P]), m.header)
+
+
+def _reduced(width, height, K, P, binning, offset, size):
+    """(width, height, K, P) of the images a camera publishes from the region ``offset`` (x, y) px and
+    ``size`` (width, height; 0: to the sensor's edge) of its sensor, binned by ``binning`` (x, y):
+    binned pixel u' covers sensor pixels u' b .. u' b + b - 1, so a sensor coordinate u is
+    u' = (u - x_offset - (b - 1) / 2) / b; K and P (flattened 3x3, 3x4) map to u' row by row. The
+    distortion D and rectification R are of normalised coordinates and stay."""
+    (bx, by), (x0, y0) = binning, offset
+    w = size[0] or width - x0
+    h = size[1] or height - y0
+    reduced = []
+    for M, columns in ((K, 3), (P, 4)):
+        M = M.reshape(3, columns).copy()
+        M[0] = (M[0] - (x0 + (bx - 1) / 2) * M[2]) / bx
+        M[1] = (M[1] - (y0 + (by - 1) / 2) * M[2]) / by
+        reduced.append(M.ravel())
+    return w // bx, h // by, reduced[0], reduced[1]
 
 
 def transforms_from_ros(m) -> FrameTransforms:
