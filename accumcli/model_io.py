@@ -122,9 +122,10 @@ def _is_text(head: bytes) -> bool:
 
 def _sniff(path) -> tuple[str, str | None]:
     """(kind, the format tag if a JSON file has one). A recording is an MCAP file, a rosbag2
-    ``.db3`` (SQLite) file, a rosbag2 folder (with its metadata.yaml) or a ROS 1 ``.bag``, by the
-    magic bytes ``recording.ros2.bag_kind`` reads too."""
-    if os.path.isdir(path) and os.path.isfile(os.path.join(path, "metadata.yaml")):
+    ``.db3`` (SQLite) file, a rosbag2 folder (with its metadata.yaml), a ROS 1 ``.bag`` or a folder of
+    them (a split bag), as ``recording.ros2.bag_kind`` tells them too."""
+    if os.path.isdir(path) and (os.path.isfile(os.path.join(path, "metadata.yaml"))
+                                or any(n.endswith(".bag") for n in os.listdir(path))):   # rosbag2, split ROS 1
         return "recording", None
     head = _head(path)
     if not head.strip():

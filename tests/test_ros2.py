@@ -246,7 +246,7 @@ def test_a_topic_with_another_ros_type_is_an_error(tmp_path):
 
 
 def test_directory_without_metadata_is_a_clear_error(tmp_path):
-    with pytest.raises(RecordingError, match="directory without metadata.yaml"):
+    with pytest.raises(RecordingError, match="a folder with neither a rosbag2 bag \(metadata.yaml\) nor the .bag files of a split ROS 1 bag"):
         Recording(tmp_path)
 
 
@@ -500,3 +500,38 @@ def test_binned_and_cropped_images_use_their_reduced_calibration(raw_recording, 
     ends = theirs.endpoints()
     off = _point_edge_distance(ours.centers, ends[:, 0], ends[:, 1]).min(axis=1)
     assert len(ours) > 20 and np.median(off) < 0.002   # metres: the same edges, at half the resolution
+
+
+class _SplitBags:
+    """ROS 1 messages written to name_0.bag, name_1.bag, ... in ``folder``, a new file every ``per_file``
+    stereo frames' worth of log time, as ``rosbag record --split`` does."""
+
+    def __init__(self, folder, period_ns, frames_per_file):
+        self.folder, self.span, self.writers = folder, period_ns * frames_per_file, {}
+        self.start = None
+
+    def ros_message(self, topic, message, log_time):
+        self.start = log_time if self.start is None else self.start
+        part = (log_time - self.start) // self.span
+        if part not in self.writers:
+            self.writers[part] = _Ros1BagWriter(self.folder / f"run_{part}.bag")
+        self.writers[part].ros_message(topic, message, log_time)
+
+    def close(self):
+        for w in self.writers.values():
+            w.close()
+
+
+def test_a_split_ros1_bag_is_read_from_its_folder(small_recording, tmp_path):
+    """A folder of a split ROS 1 bag's files (run_0.bag, run_1.bag) is one recording, in time order, and gives
+    the protobuf recording's model (only one file could be read, and the hint named the folder in vain)."""
+    with Recording(small_recording) as rec:
+        times = [f.timestamp_ns for f in rec.frames()]
+    folder = tmp_path / "split"
+    folder.mkdir()
+    writer = _SplitBags(folder, times[1] - times[0], 3)
+    convert_to_ros2(small_recording, writer)
+    writer.close()
+    assert sorted(p.name for p in folder.iterdir()) == ["run_0.bag", "run_1.bag"]
+    assert file_kind(folder) == "recording"
+    assert _model_bytes(str(folder), tmp_path / "split.json") == _model_bytes(small_recording, tmp_path / "pb.json")

@@ -263,13 +263,10 @@ def _folder_problem(path: str) -> str:
     except OSError as e:
         return f"a folder that cannot be listed ({e.strerror or e})"
     storage = [n for n in names if n.endswith((".db3", ".mcap"))]
-    bags = [n for n in names if n.endswith(".bag")]
     if storage:
         return (f"a folder without metadata.yaml, holding {', '.join(storage[:3])}: a rosbag2 recording that was "
                 f"killed leaves none: run 'ros2 bag reindex {path}', or give {storage[0]} itself")
-    if bags:
-        return f"a folder without metadata.yaml, holding {', '.join(bags[:3])}: give one .bag file"
-    return "a directory without metadata.yaml (neither an MCAP file nor a rosbag2 folder)"
+    return "a folder with neither a rosbag2 bag (metadata.yaml) nor the .bag files of a split ROS 1 bag"
 
 
 class Recording:
@@ -570,7 +567,7 @@ class Recording:
         channel = self._channels.get(static)
         if channel is None or not self._message_count(static):
             return (f"; {static} has no message here (a split bag records it in its first file only: give the "
-                    + ("files merged into one" if self.bag == "rosbag1" else "bag's folder") + ")")
+                    + "bag's folder, which holds all its files)")
         return ""
 
     def _check_image_frame(self) -> None:

@@ -26,7 +26,9 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Callable, Iterator
 
 import numpy as np
@@ -182,11 +184,28 @@ def _one_line(e: Exception) -> str:
     return " ".join(str(e).split())[:300]
 
 
+def split_bag_files(folder: str) -> list[str]:
+    """The ROS 1 bags of a folder (``rosbag record --split`` writes name_0.bag, name_1.bag, ...), in the
+    order of their numbers; [] if it holds none, or rosbag2 storage files beside them."""
+    try:
+        names = os.listdir(folder)
+    except OSError:
+        return []
+    if any(n.endswith((".db3", ".mcap")) for n in names):
+        return []
+    bags = [n for n in names if n.endswith(".bag") and os.path.isfile(os.path.join(folder, n))]
+    number = re.compile(r"(\d+)\.bag$")
+    return [os.path.join(folder, n) for n in sorted(bags, key=lambda n: (int(number.search(n).group(1))
+                                                                          if number.search(n) else -1, n))]
+
+
 def bag_kind(path: str) -> str | None:
     """'rosbag2' for a folder with metadata.yaml, 'db3' for an SQLite file, 'rosbag1' for a ROS 1 bag,
     None otherwise."""
     if os.path.isdir(path):
-        return "rosbag2" if os.path.isfile(os.path.join(path, "metadata.yaml")) else None
+        if os.path.isfile(os.path.join(path, "metadata.yaml")):
+            return "rosbag2"
+        return "rosbag1" if split_bag_files(path) else None
     try:
         with open(path, "rb") as f:
             head = f.read(max(len(SQLITE_MAGIC), len(ROSBAG1_MAGIC)))
@@ -212,11 +231,18 @@ class RosbagScan:
         self.store = None   # ROS 1: the Noetic types with the bag's own definitions
 
     def _open(self):
-        if self.kind == "rosbag1":
+        if self.kind == "rosbag1" and os.path.isdir(self.path):   # a split bag's files, merged in time order
+            from rosbags.highlevel import AnyReader
+
+            reader = AnyReader([Path(p) for p in split_bag_files(self.path)])
+        elif self.kind == "rosbag1":
             from rosbags.rosbag1 import Reader
+
+            reader = Reader(self.path)
         else:
             from rosbags.rosbag2 import Reader
-        reader = Reader(self.path)
+
+            reader = Reader(self.path)
         reader.open()
         return reader
 
@@ -228,16 +254,18 @@ class RosbagScan:
                     if self.kind == "rosbag1" and "index" in str(e).lower() else "")
             raise RecordingError(f"{self.path}: cannot be read as a {self.name} ({_one_line(e)}){hint}") from None
         try:
+            connections = list(reader.connections)
             if self.kind == "rosbag1":
                 self.store = _ros1_typestore([(c.topic, c.msgtype, getattr(c.msgdef, "data", c.msgdef))
-                                              for c in reader.connections])
-            for c in reader.connections:
+                                              for c in connections])
+            number = {id(c): k for k, c in enumerate(connections)}   # the files of a split bag number theirs alike
+            for k, c in enumerate(connections):
                 encoding = "ros1" if self.kind == "rosbag1" else getattr(c.ext, "serialization_format", "cdr")
-                self.channels[c.id] = _Channel(c.id, c.msgtype, c.topic, encoding)
+                self.channels[k] = _Channel(k, c.msgtype, c.topic, encoding)
             try:
                 for c, timestamp, data in reader.messages():
                     self.last_time_ns = timestamp
-                    yield _Message(c.id, int(timestamp), memoryview(data))
+                    yield _Message(number[id(c)], int(timestamp), memoryview(data))
             except Exception as e:   # read up to the damage, as an MCAP file is (the reader warns)
                 self.footer, self.broken = False, f"{type(e).__name__}: {_one_line(e)}"
         finally:
