@@ -246,7 +246,8 @@ def test_a_topic_with_another_ros_type_is_an_error(tmp_path):
 
 
 def test_directory_without_metadata_is_a_clear_error(tmp_path):
-    with pytest.raises(RecordingError, match="a folder with neither a rosbag2 bag \(metadata.yaml\) nor the .bag files of a split ROS 1 bag"):
+    with pytest.raises(RecordingError, match=r"a folder with neither a rosbag2 bag \(metadata.yaml\) nor the .bag files "
+                                             "of a split ROS 1 bag"):
         Recording(tmp_path)
 
 
