@@ -713,7 +713,9 @@ class Recording:
                 info.intrinsics = rectifier.intrinsics
                 info.image_size = (rectifier.intrinsics.width, rectifier.intrinsics.height)
                 info.rectified_input = rectifier.rectified_input
-                info.distortion_model = self.calibrations["left"][0][1].distortion_model or "none"
+                left_cal = self.calibrations["left"][0][1]
+                info.distortion_model = left_cal.distortion_model or (   # unnamed: OpenCV's by its coefficients
+                    f"unnamed: {len(left_cal.D)} coefficients" if np.any(left_cal.D) else "none")
                 try:
                     declared = image_size(left_msg)
                 except DecodeError:
