@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .atomic import atomic_open
-from .errors import AccumError, InputError
+from .errors import AccumError, InputError, is_whole_number
 from .model_io import dumps
 from .pipeline import AccumulateParams
 from .runs import FrameRange, RecordingOptions, accumulate_recording, evaluate_file, track_recording
@@ -145,8 +145,9 @@ def run_batch(recordings, outdir, options: BatchOptions = BatchOptions(), *, wor
         raise InputError("--workers sets the local pool's processes; with --ray the cluster schedules the "
                          "recordings on its CPUs: drop --workers")
     workers = 1 if workers is None else workers
-    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+    if not is_whole_number(workers) or workers < 1:
         raise InputError(f"expected at least 1 worker, found {workers}")
+    workers = int(workers)
     if ray_address is None:
         workers = resolve_workers(workers, len(recordings))   # a local pool: at most the recordings and CPUs
     try:

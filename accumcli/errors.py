@@ -20,3 +20,15 @@ class PoseUnavailable(AccumError):
 
 class InputError(AccumError, ValueError):
     """An argument of the wrong shape or value given to the library (or an option given to the CLI)."""
+
+
+def one_line(e: Exception, limit: int = 300) -> str:
+    """An exception's message on one line, at most ``limit`` characters (for a one-line error or warning)."""
+    return " ".join(str(e).split())[:limit]
+
+
+def is_whole_number(value) -> bool:
+    """An integer (Python's or numpy's), not a bool: what counts, frames and nanoseconds must be."""
+    import numbers
+
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool)

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .errors import InputError
+from .errors import InputError, is_whole_number
 from .geometry import invert, pose_error
 from .model_io import Truth
 from .segments import Segments
@@ -48,8 +48,9 @@ class Tolerances:
             if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
                     or not np.isfinite(value) or value <= 0:
                 raise InputError(f"{name}: expected a positive number, found {value!r}")
-        if isinstance(self.min_seen, bool) or not isinstance(self.min_seen, (int, np.integer)) or self.min_seen < 1:
+        if not is_whole_number(self.min_seen) or self.min_seen < 1:
             raise InputError(f"min_seen: expected a whole number of frames of at least 1, found {self.min_seen!r}")
+        object.__setattr__(self, "min_seen", int(self.min_seen))
 
 
 @dataclass

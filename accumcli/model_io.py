@@ -123,14 +123,15 @@ def _is_text(head: bytes) -> bool:
 def _sniff(path) -> tuple[str, str | None]:
     """(kind, the format tag if a JSON file has one). A recording is an MCAP file, a rosbag2
     ``.db3`` (SQLite) file, a rosbag2 folder (with its metadata.yaml), a ROS 1 ``.bag`` or a folder of
-    them (a split bag), as ``recording.ros2.bag_kind`` tells them too."""
-    if os.path.isdir(path) and (os.path.isfile(os.path.join(path, "metadata.yaml"))
-                                or any(n.endswith(".bag") for n in os.listdir(path))):   # rosbag2, split ROS 1
+    them (a split bag): the last four as ``recording.ros2.bag_kind`` tells them."""
+    from .recording.ros2 import bag_kind   # the bags' own test (heavier imports: only when a file is looked at)
+
+    if bag_kind(str(path)):
         return "recording", None
     head = _head(path)
     if not head.strip():
         return "empty", None
-    if head.startswith((b"\x89MCAP", b"SQLite format 3\0", b"#ROSBAG V2.0\n")):
+    if head.startswith(b"\x89MCAP"):
         return "recording", None
     if head.startswith((b"ply\n", b"ply\r\n")):
         return "ply", None

@@ -322,6 +322,9 @@ def test_sixteen_bit_images_are_scaled_by_the_bits_they_use(bits, full_scale):
     assert sixteen_bit_full_scale(msg) == full_scale
     assert np.abs(decode_image(msg, full_scale=full_scale).astype(int) - grey).max() <= 1
     assert sixteen_bit_full_scale(image_to_msg(grey, 0, "cam", "png")) is None
+    rgba = np.dstack([data.reshape(grey.shape)] * 3 + [np.full(grey.shape, 65535, "<u2")])   # opaque alpha
+    assert sixteen_bit_full_scale(RawImage(width=grey.shape[1], height=grey.shape[0], encoding="rgba16",
+                                           step=rgba.strides[0], data=rgba.tobytes())) == full_scale
     png = CompressedImage(format="png", data=cv2.imencode(".png", data.reshape(grey.shape))[1].tobytes())
     assert sixteen_bit_full_scale(png) == full_scale   # a 16-bit PNG of the same data (an empty model before)
     assert np.abs(decode_image(png, full_scale=full_scale).astype(int) - grey).max() <= 1
@@ -548,6 +551,29 @@ def test_a_damaged_jpeg_is_refused_and_extraneous_bytes_are_not():
     data[len(data) // 2:len(data) // 2 + 50] = b"\0" * 50
     with pytest.raises(DecodeError, match="damaged jpeg image data .*premature end of data segment"):
         decode_image(CompressedImage(format="jpeg", data=bytes(data)))
+
+
+def test_a_jpeg_that_lost_its_way_in_corrupt_data_is_refused():
+    """libjpeg reports "N extraneous bytes before marker 0xd9" also after corrupt data threw it off: more than 2
+    such bytes that are not padding are damage (86 % of one such image was off by more than 20 levels)."""
+    from accumcli.recording.messages import DecodeError, _CapturedStderr
+
+    rng = np.random.default_rng(0)
+    grey = cv2.GaussianBlur((rng.random((240, 320)) * 255).astype(np.uint8), (7, 7), 2)
+    good = cv2.imencode(".jpg", grey)[1].tobytes()
+    found = 0
+    for _ in range(400):
+        data = bytearray(good)
+        at = int(rng.integers(700, len(data) - 10))
+        data[at:at + 3] = rng.integers(0, 256, 3).astype(np.uint8).tobytes()
+        with _CapturedStderr() as said:
+            cv2.imdecode(np.frombuffer(bytes(data), np.uint8), cv2.IMREAD_UNCHANGED)
+        if "extraneous bytes before marker 0xd9" in said.text and not said.text.startswith(("Corrupt JPEG data: 1 ",
+                                                                                              "Corrupt JPEG data: 2 ")):
+            found += 1
+            with pytest.raises(DecodeError, match="damaged jpeg image data"):
+                decode_image(CompressedImage(format="jpeg", data=bytes(data)))
+    assert found >= 1
 
 
 def test_a_compressed_depth_topic_is_refused_when_the_recording_opens(tmp_path):

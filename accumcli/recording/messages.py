@@ -17,6 +17,7 @@ import atexit
 import json
 import math
 import os
+import re
 import struct
 import tempfile
 import threading
@@ -32,6 +33,7 @@ from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 from google.protobuf import json_format
 from google.protobuf.timestamp_pb2 import Timestamp
 
+from ..errors import one_line
 from .calibration import MAX_PIXELS, MAX_SIDE, CameraCalibration, size_problem  # noqa: F401
 
 _U16 = np.dtype("<u2")
@@ -52,6 +54,7 @@ RAW_ENCODINGS = {
     "yuyv": (2, np.uint8, cv2.COLOR_YUV2GRAY_YUY2), "yuv422_yuy2": (2, np.uint8, cv2.COLOR_YUV2GRAY_YUY2),
 }
 SIXTEEN_BIT = tuple(name for name, (_, dtype, _) in RAW_ENCODINGS.items() if dtype == _U16)
+YUV422 = ("uyvy", "yuv422", "yuyv", "yuv422_yuy2")
 
 
 def encoding_problem(msg) -> str | None:
@@ -62,6 +65,8 @@ def encoding_problem(msg) -> str | None:
         return (f"image format {msg.format!r} is a compressed depth image (ROS compressedDepth); accum needs the "
                 "cameras' intensity images: choose their topics")
     encoding = getattr(msg, "encoding", None)
+    if encoding in YUV422 and msg.width % 2:
+        return f"image encoding {encoding!r} (YUV 4:2:2) needs an even width, found {msg.width} px"
     if encoding is None or encoding in RAW_ENCODINGS:
         return None
     if encoding in ("32FC1", "64FC1"):
@@ -172,7 +177,10 @@ def sixteen_bit_full_scale(msg) -> int | None:
     PNG of 12-bit data gave an empty model)."""
     data = getattr(msg, "data", b"")
     if getattr(msg, "encoding", None) in SIXTEEN_BIT and data:
-        largest = int(np.frombuffer(data[:len(data) // 2 * 2], "<u2").max())
+        values = np.frombuffer(data[:len(data) // 2 * 2], "<u2")
+        if RAW_ENCODINGS[msg.encoding][0] == 4:   # an opaque alpha (65535) says nothing of the colours' bits
+            values = values[:len(values) // 4 * 4].reshape(-1, 4)[:, :3]
+        largest = int(values.max(initial=0))
     elif hasattr(msg, "format") and data[:8] == PNG_SIGNATURE and len(data) > 24 and data[24] == 16:
         image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)   # the IHDR says 16 bits
         if image is None or image.dtype != np.uint16:
@@ -205,11 +213,11 @@ def decode_image(msg, expected_size: tuple[int, int] | None = None, full_scale: 
                 image = cv2.imdecode(buffer, cv2.IMREAD_UNCHANGED)
             except cv2.error:
                 image = None
-        said = " ".join(captured.text.split())[:200]
+        said = one_line(captured.text, 200)
         if image is None:
             raise DecodeError(f"cannot decode {msg.format or 'compressed'} image bytes ({len(msg.data)} bytes)"
                               + (f": {said}" if said else ""))
-        if _damaged(said):   # libjpeg decodes what it can and fills the rest grey: edges that are not there
+        if _damaged(captured.text, msg.data):   # libjpeg decodes what it can and fills the rest grey
             raise DecodeError(f"damaged {msg.format or 'compressed'} image data ({said})")
         if image.shape[1] != width or image.shape[0] != height:
             raise DecodeError(f"decoded image is {image.shape[1]}x{image.shape[0]}, its header said {width}x{height}")
@@ -238,20 +246,30 @@ def decode_image(msg, expected_size: tuple[int, int] | None = None, full_scale: 
     return np.ascontiguousarray(image, dtype=np.uint8)
 
 
-def _damaged(codec_said: str) -> bool:
+_EXTRANEOUS = re.compile(r"corrupt jpeg data: (\d+) extraneous bytes before marker 0xd9$")
+
+
+def _damaged(codec_said: str, data: bytes) -> bool:
     """A codec's warning that the image it still returned is partly made up: libjpeg's corrupt or cut
-    data (filled grey from there on); not its note of extraneous bytes before a marker, which many
-    cameras' JPEGs carry and which loses no pixel."""
-    said = codec_said.lower()
-    return "premature end" in said or ("corrupt jpeg data" in said and "extraneous bytes" not in said)
+    data (filled grey from there on). Its one note of a few extraneous bytes before the final end marker
+    is not: some cameras pad their JPEGs so, and no pixel is lost; but libjpeg says the same after it
+    lost its way in corrupt data, so more than 2 such bytes count only if they are padding (0x00 or
+    0xff)."""
+    said = [line.strip().lower() for line in codec_said.splitlines() if line.strip()]
+    if not said:
+        return False
+    padded = _EXTRANEOUS.match(said[0]) if len(said) == 1 else None
+    if padded and bytes(data[-2:]) == b"\xff\xd9":
+        n = int(padded.group(1))
+        return n > 2 and bytes(data[-2 - n:-2]).strip(b"\x00\xff") != b""
+    return any("premature end" in line or "corrupt jpeg data" in line or "huffman" in line for line in said)
 
 
 def _to_grey(image: np.ndarray, code: int, msg) -> np.ndarray:
     """(H, W) grey of a raw colour, Bayer or YUV 4:2:2 ``image`` (H, W, channels) by OpenCV's ``code``.
     Bayer is demosaiced (bilinear) before the grey, never read as grey: a raw pattern's pixels alternate
-    between the filters' responses, a grid of edges. YUV 4:2:2's grey is its luma."""
-    if msg.encoding.startswith(("uyvy", "yuyv", "yuv422")) and msg.width % 2:
-        raise DecodeError(f"{msg.encoding} image {msg.width} px wide: YUV 4:2:2 needs an even width")
+    between the filters' responses, a grid of edges. YUV 4:2:2's grey is its luma (an odd width is refused
+    when the recording opens: ``encoding_problem``)."""
     if msg.encoding.startswith("bayer_") and (msg.width < 2 or msg.height < 2):
         raise DecodeError(f"{msg.encoding} image {msg.width}x{msg.height}: a Bayer pattern needs 2x2 pixels")
     return cv2.cvtColor(image if image.shape[2] > 1 else image[:, :, 0], code)
@@ -267,8 +285,8 @@ def from_foxglove_json(cls, data):
         raise ValueError("the message is not a JSON object")
     try:
         return json_format.ParseDict(_times_as_text(doc), cls(), ignore_unknown_fields=True)
-    except json_format.ParseError as e:
-        raise ValueError(" ".join(str(e).split())[:200]) from None
+    except (json_format.ParseError, ValueError, OverflowError) as e:
+        raise ValueError(one_line(e, 200)) from None
 
 
 def _times_as_text(value):

@@ -318,8 +318,13 @@ class Recording:
         if not os.path.exists(self.path):
             raise self._fail("no such file")
         self.bag = ros2.bag_kind(self.path)
+        self.bag_damage = None   # what a damaged bag lost (``_index``)
         if self.bag is not None:
             self.size, self.truncated = 0, False
+            active = ros2.unfinished_bag_files(self.path) if self.bag == "rosbag1" else []
+            if active:
+                log.warning("%s: %s is a recording cut short, not read: run 'rosbag reindex' on it and drop its "
+                            "'.active' to read its frames too", self.path, active[0])
             return
         if not os.path.isfile(self.path):
             raise self._fail(_folder_problem(self.path))
@@ -450,7 +455,7 @@ class Recording:
                     t_ns = self._stamp(tf, log_time, warn, topic)
                     if t_ns is None:
                         continue
-                    if tf.parent_frame_id == tf.child_frame_id:
+                    if frame_name(tf.parent_frame_id) == frame_name(tf.child_frame_id):
                         warn("self transform", "%s: transform from %r to itself at %.3f s: skipped", self.path,
                              tf.parent_frame_id, t_ns * 1e-9)
                         continue
@@ -483,17 +488,19 @@ class Recording:
             how = "truncated" if self.truncated else "corrupt"
             raise self._fail(f"{how} MCAP file: no readable channel in its {self.size} bytes"
                              + (f" ({scan.broken})" if scan.broken else ""))
+        last = f"{scan.last_time_ns * 1e-9:.3f} s" if scan.last_time_ns is not None else "none"
         if not scan.footer and self.bag:
-            last = f"{scan.last_time_ns * 1e-9:.3f} s" if scan.last_time_ns is not None else "none"
+            self.bag_damage = f"damaged after {last} ({scan.broken})"
             log.warning("%s: damaged bag (%s): read up to its last message before the damage, at %s; the rest "
                         "is lost", self.path, scan.broken, last)
         elif not scan.footer:
-            last = f"{scan.last_time_ns * 1e-9:.3f} s" if scan.last_time_ns is not None else "none"
             what = "truncated recording (no MCAP footer)" if self.truncated else f"damaged recording ({scan.broken})"
             log.warning("%s: %s: read up to byte %d of %d, %d bytes lost; last message read at %s", self.path,
                         what, self.size - scan.lost_bytes, self.size, scan.lost_bytes, last)
 
     def _lost(self) -> str:
+        if self.bag_damage:
+            return f" (the bag is {self.bag_damage})"
         return f" (the file is truncated or damaged: {self.lost_bytes} of its {self.size} bytes unreadable)" \
             if self.lost_bytes else ""
 
@@ -503,8 +510,8 @@ class Recording:
         for topic in (t.left_image, t.right_image, t.left_calibration, t.right_calibration):
             if topic not in self._channels:
                 proposal = ros2.propose_topics(self._channels)
-                hint = (f"; this recording looks like ROS {1 if self.bag == 'rosbag1' else 2}: try {proposal}"
-                        if proposal else "")
+                version = 1 if any(c.message_encoding == "ros1" for c in self._channels.values()) else 2
+                hint = f"; this recording looks like ROS {version}: try {proposal}" if proposal else ""
                 if not proposal:
                     proposal = ros2.propose_topics(self._channels, tuple(IMAGE_TYPES), tuple(CALIBRATION_TYPES),
                                                    "foxglove.RawImage")

@@ -41,7 +41,7 @@ from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 from google.protobuf.timestamp_pb2 import Timestamp
 
-from ..errors import RecordingError
+from ..errors import RecordingError, one_line
 from .mcap_records import _Channel, _Message
 from .messages import SIXTEEN_BIT
 
@@ -147,7 +147,7 @@ def mcap_cdr_decoder(channel: _Channel) -> Callable[[memoryview], object]:
     try:
         decode = DecoderFactory().decoder_for("cdr", schema)
     except Exception as e:  # the ros2msg parser raises its own error types
-        raise ValueError(f"its ros2msg schema cannot be parsed ({_one_line(e)})") from None
+        raise ValueError(f"its ros2msg schema cannot be parsed ({one_line(e)})") from None
     if decode is None:
         raise ValueError("no CDR decoder for its schema")
     convert = CONVERTERS[channel.schema_name]
@@ -180,10 +180,6 @@ def typestore():
     return _TYPESTORE
 
 
-def _one_line(e: Exception) -> str:
-    return " ".join(str(e).split())[:300]
-
-
 def split_bag_files(folder: str) -> list[str]:
     """The ROS 1 bags of a folder (``rosbag record --split`` writes name_0.bag, name_1.bag, ...), in the
     order of their numbers; [] if it holds none, or rosbag2 storage files beside them."""
@@ -193,10 +189,19 @@ def split_bag_files(folder: str) -> list[str]:
         return []
     if any(n.endswith((".db3", ".mcap")) for n in names):
         return []
-    bags = [n for n in names if n.endswith(".bag") and os.path.isfile(os.path.join(folder, n))]
+    bags = [n for n in names if n.endswith(".bag") and not n.endswith(".orig.bag")   # rosbag reindex's backup
+            and os.path.isfile(os.path.join(folder, n))]
     number = re.compile(r"(\d+)\.bag$")
     return [os.path.join(folder, n) for n in sorted(bags, key=lambda n: (int(number.search(n).group(1))
                                                                           if number.search(n) else -1, n))]
+
+
+def unfinished_bag_files(folder: str) -> list[str]:
+    """A split bag folder's files that a killed recorder left (name.bag.active: no index), not read."""
+    try:
+        return sorted(n for n in os.listdir(folder) if n.endswith(".bag.active")) if os.path.isdir(folder) else []
+    except OSError:
+        return []
 
 
 def bag_kind(path: str) -> str | None:
@@ -252,7 +257,7 @@ class RosbagScan:
         except Exception as e:  # rosbags raises its own errors, and sqlite3 / yaml ones through it
             hint = ("; a bag cut short (a .bag.active of a recorder that was killed) needs 'rosbag reindex' first"
                     if self.kind == "rosbag1" and "index" in str(e).lower() else "")
-            raise RecordingError(f"{self.path}: cannot be read as a {self.name} ({_one_line(e)}){hint}") from None
+            raise RecordingError(f"{self.path}: cannot be read as a {self.name} ({one_line(e)}){hint}") from None
         try:
             connections = list(reader.connections)
             if self.kind == "rosbag1":
@@ -262,21 +267,24 @@ class RosbagScan:
             for k, c in enumerate(connections):
                 encoding = "ros1" if self.kind == "rosbag1" else getattr(c.ext, "serialization_format", "cdr")
                 self.channels[k] = _Channel(k, c.msgtype, c.topic, encoding)
-            try:
-                for c, timestamp, data in reader.messages():
-                    self.last_time_ns = timestamp
-                    yield _Message(number[id(c)], int(timestamp), memoryview(data))
-            except Exception as e:   # read up to the damage, as an MCAP file is (the reader warns)
-                self.footer, self.broken = False, f"{type(e).__name__}: {_one_line(e)}"
+            messages = iter(reader.messages())
+            while True:
+                try:
+                    c, timestamp, data = next(messages)
+                except StopIteration:
+                    break
+                except Exception as e:   # rosbags' reading (its own, sqlite3's, the codecs' errors): read up to
+                    self.footer, self.broken = False, f"{type(e).__name__}: {one_line(e)}"   # the damage, as an
+                    break                                                               # MCAP is (the reader warns)
+                self.last_time_ns = timestamp
+                yield _Message(number[id(c)], int(timestamp), memoryview(data))
         finally:
             reader.close()
 
     def decoder(self, channel: _Channel) -> Callable[[memoryview], object]:
-        convert, name = CONVERTERS[channel.schema_name], channel.schema_name
         if self.kind == "rosbag1":
-            store = self.store
-            return lambda data: convert(store.deserialize_ros1(bytes(data), name))
-        store = typestore()
+            return _ros1_decoder(self.store, channel.schema_name)
+        convert, name, store = CONVERTERS[channel.schema_name], channel.schema_name, typestore()
         return lambda data: convert(store.deserialize_cdr(bytes(data), name))
 
 
@@ -293,7 +301,7 @@ def _ros1_typestore(definitions):
                 store.register(get_types_from_msg(text, msgtype))
             except Exception as e:  # rosbags' parser raises its own error types
                 raise RecordingError(f"{topic}: the recording's definition of {msgtype} cannot be parsed "
-                                     f"({_one_line(e)})") from None
+                                     f"({one_line(e)})") from None
     return store
 
 
@@ -306,8 +314,13 @@ def mcap_ros1_decoder(channel: _Channel) -> Callable[[memoryview], object]:
     try:
         store = _ros1_typestore([(channel.topic, channel.schema_name, bytes(channel.schema_data).decode())])
     except (RecordingError, UnicodeDecodeError) as e:
-        raise ValueError(f"its ros1msg schema cannot be parsed ({_one_line(e)})") from None
-    convert, name = CONVERTERS[channel.schema_name], channel.schema_name
+        raise ValueError(f"its ros1msg schema cannot be parsed ({one_line(e)})") from None
+    return _ros1_decoder(store, channel.schema_name)
+
+
+def _ros1_decoder(store, name: str) -> Callable[[memoryview], object]:
+    """bytes -> Foxglove protobuf message for ROS 1 messages of type ``name`` in ``store``."""
+    convert = CONVERTERS[name]
     return lambda data: convert(store.deserialize_ros1(bytes(data), name))
 
 

@@ -11,13 +11,12 @@ from __future__ import annotations
 
 import logging
 import math
-import numbers
 import os
 import re
 from dataclasses import dataclass, field
 from typing import Callable
 
-from ..errors import AccumError, InputError
+from ..errors import AccumError, InputError, is_whole_number
 from ..recording import Recording, Topics
 from ..recording.tf_tree import OUTSIDE_SAMPLES, OUTSIDE_SAMPLES_PATTERN, frame_name
 
@@ -50,7 +49,7 @@ class RecordingOptions:
     def __post_init__(self):
         for name, lowest in (("tolerance_ns", 0), ("time_offset_ns", -MAX_OFFSET_NS)):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not lowest <= value <= MAX_OFFSET_NS:
+            if not is_whole_number(value) or not lowest <= value <= MAX_OFFSET_NS:
                 raise InputError(f"{name}: expected whole nanoseconds from {lowest} to {MAX_OFFSET_NS}, found {value!r}")
             object.__setattr__(self, name, int(value))
         for name in ("camera_frame", "object_frame"):
@@ -77,11 +76,8 @@ class FrameRange:
     stop: int | None = None
 
     def __post_init__(self):
-        def whole(x):
-            return isinstance(x, numbers.Integral) and not isinstance(x, bool)
-
-        if not whole(self.start) or self.start < 0 or (
-                self.stop is not None and (not whole(self.stop) or self.stop <= self.start)):
+        if not is_whole_number(self.start) or self.start < 0 or (
+                self.stop is not None and (not is_whole_number(self.stop) or self.stop <= self.start)):
             raise InputError(f"frames {self.start!r}:{self.stop!r}: expected whole numbers 0 <= START < STOP")
         object.__setattr__(self, "start", int(self.start))   # numpy integers as Python's (JSON, hashing)
         object.__setattr__(self, "stop", None if self.stop is None else int(self.stop))

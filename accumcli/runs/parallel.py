@@ -37,7 +37,7 @@ import os
 from concurrent.futures import Future, ProcessPoolExecutor, wait
 from typing import Iterable, Iterator
 
-from ..errors import InputError
+from ..errors import InputError, is_whole_number
 from ..extract import ExtractParams, FrameSegments, extract_frame
 from ..lines2d import StageTimes
 from ..outputs import signals_blocked
@@ -103,11 +103,11 @@ def resolve_workers(workers: int | str | None, frames: int) -> int:
         workers = None
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     if workers is not None:
-        if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        if not is_whole_number(workers) or workers < 1:
             raise InputError(f"workers: expected a whole number of at least 1, or 'auto' / None, found {workers!r}")
         if workers > cpus:
             log.warning("--workers %d: this machine gives the run %d CPUs; using at most %d", workers, cpus, cpus)
-        return max(1, min(workers, cpus, frames))
+        return max(1, min(int(workers), cpus, frames))
     return 1 if frames < AUTO_MIN_FRAMES or cpus < 2 else 2
 
 
