@@ -523,9 +523,10 @@ class _SplitBags:
             w.close()
 
 
-def test_a_split_ros1_bag_is_read_from_its_folder(small_recording, tmp_path):
+def test_a_split_ros1_bag_is_read_from_its_folder(small_recording, tmp_path, caplog):
     """A folder of a split ROS 1 bag's files (run_0.bag, run_1.bag) is one recording, in time order, and gives
-    the protobuf recording's model (only one file could be read, and the hint named the folder in vain)."""
+    the protobuf recording's model (only one file could be read, and the hint named the folder in vain);
+    rosbag reindex's .orig.bag backup is left out, a .bag.active named in a warning."""
     with Recording(small_recording) as rec:
         times = [f.timestamp_ns for f in rec.frames()]
     folder = tmp_path / "split"
@@ -535,4 +536,9 @@ def test_a_split_ros1_bag_is_read_from_its_folder(small_recording, tmp_path):
     writer.close()
     assert sorted(p.name for p in folder.iterdir()) == ["run_0.bag", "run_1.bag"]
     assert file_kind(folder) == "recording"
-    assert _model_bytes(str(folder), tmp_path / "split.json") == _model_bytes(small_recording, tmp_path / "pb.json")
+    (folder / "run_0.orig.bag").write_bytes((folder / "run_0.bag").read_bytes()[:3000])   # rosbag reindex's backup
+    (folder / "run_2.bag.active").write_bytes(b"#ROSBAG V2.0\n")   # a killed recorder's last file
+    with caplog.at_level("WARNING", logger="accumcli"):
+        assert _model_bytes(str(folder), tmp_path / "split.json") == _model_bytes(small_recording,
+                                                                                  tmp_path / "pb.json")
+    assert "run_2.bag.active is a recording cut short, not read" in caplog.text
