@@ -151,14 +151,24 @@ def score_segments(segments: Segments, edges: EdgeSamples, tol: Tolerances = Tol
 def evaluate_model(model: Segments, truth: Truth, tol: Tolerances = Tolerances()) -> dict:
     """Scores of a model's accepted segments (confidence >= 0.5) against the truth, and the
     completeness of all its segments whatever their confidence (``completeness_any_confidence``:
-    what accumulation found but has not, or not yet, confirmed)."""
+    what accumulation found but has not, or not yet, confirmed). Where the truth's edges name two or
+    more parts (the object, the gripper that holds it), ``completeness_<part>`` of each: the gripper's
+    many short edges were most of the counted length on the scoreboard, and a model can lose it alone."""
     edges = EdgeSamples.of(truth, tol)
     distance, correct, correct_for = classify(model, edges, tol)   # once for all segments, accepted or not
     a = model.accepted
     scores = _scores(model.select(a), distance[a], correct[a], correct_for[a], edges, tol).as_dict()
     anywhere = _completeness(covered_samples(model, correct_for, edges, tol), edges)
-    return {"segments": len(model), "accepted": scores.pop("segments"), **scores,
-            "completeness_any_confidence": anywhere}
+    figures = {"segments": len(model), "accepted": scores.pop("segments"), **scores,
+               "completeness_any_confidence": anywhere}
+    parts = np.asarray(truth.parts if len(truth.parts) == len(truth.a) else [""] * len(truth.a), dtype=object)
+    named = sorted({p for p in parts if p})
+    if len(named) >= 2:
+        covered = covered_samples(model.select(a), correct_for[a], edges, tol)
+        for part in named:
+            counted = edges.counted & (parts[edges.edge] == part)
+            figures[f"completeness_{part}"] = float(covered[counted].mean()) if counted.any() else float("nan")
+    return figures
 
 
 def frame_accuracy(segments_camera: Segments, T_camera_object: np.ndarray, edges: EdgeSamples,

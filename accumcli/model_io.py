@@ -478,8 +478,9 @@ def read_poses(path) -> PoseTrack:
 class Truth:
     """A truth sidecar: edges a, b (E, 3) in the object frame, their kinds, per-edge
     ``seen`` counts (list of (k,) int arrays or None), whether each counts for
-    completeness, the true poses ``T_camera_object`` by timestamp, and each pose's own
-    ``seen`` bits where it has them (timestamp_ns -> base64 of numpy.packbits over all samples)."""
+    completeness, the true poses ``T_camera_object`` by timestamp, each pose's own
+    ``seen`` bits where it has them (timestamp_ns -> base64 of numpy.packbits over all samples), and
+    each edge's ``part`` where the truth names one (an extra key of accum's and the devset's truths)."""
 
     object_frame: str
     camera_frame: str
@@ -492,6 +493,7 @@ class Truth:
     poses: np.ndarray
     meta: dict
     pose_seen: dict = field(default_factory=dict)
+    parts: list = field(default_factory=list)   # per edge its "part" ('object', 'gripper', ...; '' if none)
 
     def pose_at(self, t_ns: int, tolerance_ns: int = 1_000_000) -> np.ndarray | None:
         if len(self.times_ns) == 0:
@@ -528,4 +530,5 @@ def read_truth(path) -> Truth:
     return Truth(doc.get("object_frame", ""), doc.get("camera_frame", ""), a, b,
                  [e.get("kind", "") for e in edges], seen,
                  np.array([bool(e.get("completeness", True)) for e in edges]), times, poses,
-                 {k: v for k, v in doc.items() if k not in ("edges", "poses")}, pose_seen)
+                 {k: v for k, v in doc.items() if k not in ("edges", "poses")}, pose_seen,
+                 [str(e.get("part", "")) for e in edges])

@@ -7,7 +7,8 @@ two frames (``ok twice``: about what accumulation can reach from them), the shar
 segment covers whatever its confidence (``in model``), the accumulated model's precision /
 completeness / background, and the accumulation's stereo pairs per second; then the median and the
 worst row of every column. ``ok twice`` against 1 is what extraction loses, ``complete`` against
-``ok twice`` what accumulation loses (``in model`` against ``complete``: found, never confirmed).
+``ok twice`` what accumulation loses (``in model`` against ``complete``: found, never confirmed);
+``object`` and ``gripper`` split ``complete`` by the truth edges' part, where the truth names them.
 
 The set: simulated recordings with fixed seeds (the simulator's random scenes where it has them),
 the real chessboard (sample_data/), and every recording of ../shared/data/devset (but the tracking
@@ -36,7 +37,8 @@ COLUMNS = [("2d", "funnel_detected_2d", "high"), ("not crit", "funnel_not_critic
            ("matched", "funnel_matched", "high"), ("3d ok", "funnel_correct_3d", "high"),
            ("near prec", "accuracy_near_object", "high"), ("ok twice", "funnel_correct_twice", "high"),
            ("in model", "completeness_any_confidence", "high"), ("precision", "precision", "high"),
-           ("complete", "completeness", "high"), ("backgr", "background", "low"),
+           ("complete", "completeness", "high"), ("object", "completeness_object", "high"),
+           ("gripper", "completeness_gripper", "high"), ("backgr", "background", "low"),
            ("pairs/s", "pairs_per_second", "high")]
 
 

@@ -83,6 +83,19 @@ def test_completeness_any_confidence_counts_what_is_not_accepted():
     assert scores["completeness_any_confidence"] >= 0.98
 
 
+def test_completeness_by_part_where_the_truth_names_parts():
+    """Two edges, the object's (x = 0) and the gripper's (x = 0.05 m), the model on the first only: the object's
+    part complete, the gripper's not; a truth without parts gives no such figures."""
+    two = Truth("gripper", "camera_left", np.array([[0, -0.05, 1], [0.05, -0.05, 1]], float),
+                np.array([[0, 0.05, 1], [0.05, 0.05, 1]], float), ["", ""], [np.full(50, 5), np.full(50, 5)],
+                np.array([True, True]), np.zeros(0, np.int64), np.zeros((0, 4, 4)), {}, {}, ["object", "gripper"])
+    model = _vertical_segment(-0.05, 0.05)
+    scores = evaluate_model(model, two)
+    assert scores["completeness_object"] >= 0.98 and scores["completeness_gripper"] == 0.0
+    assert 0.45 <= scores["completeness"] <= 0.55
+    assert "completeness_object" not in evaluate_model(model, _truth([0, -0.05, 1], [0, 0.05, 1]))
+
+
 def test_the_truths_seen_bits_are_those_of_the_pose_it_chose_within_the_tolerance():
     """A frame 0.5 ms from its truth pose takes that pose's bits (10 of 50 samples seen, a segment on 5
     of them: 0.5), not the projection of every sample (0.1) under the bits' label."""
