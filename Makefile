@@ -39,7 +39,8 @@ bench: $(VENV)/.installed-test
 figures: $(VENV)/.installed
 	ACCUM=$(BIN)/accum bash benchmarks/figures.sh
 
-# Regenerate the committed synthetic sample (deterministic: same bytes for the same seed).
+# Regenerate the committed synthetic sample (deterministic: the same images, poses and truth for the same
+# seed; the committed file predates one metadata field, so its bytes differ by that).
 sample: $(VENV)/.installed
 	$(BIN)/accum simulate -o $(SAMPLE) --scene classic --count 36 --seed 0 --shape box --encoding jpeg
 

@@ -31,6 +31,8 @@ from .pipeline import AccumulateParams
 from .runs import FrameRange, RecordingOptions, accumulate_recording, evaluate_file, track_recording
 from .runs.parallel import resolve_workers
 
+log = logging.getLogger("accumcli")
+
 COLUMNS = ("recording", "frames", "segments", "accepted", "precision", "completeness", "background", "status")
 TABLE_COLUMNS = COLUMNS[:-1] + ("pairs_per_s", "status")
 
@@ -72,9 +74,31 @@ def output_folder(outdir, recording) -> Path:
     return Path(outdir) / Path(recording).stem
 
 
+class _Warnings(logging.Handler):
+    """The warnings a task logs, kept for its row (a Ray worker's own log does not reach the user)."""
+
+    def __init__(self):
+        super().__init__(logging.WARNING)
+        self.messages: list[str] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.messages.append(record.getMessage())
+
+
 def run_task(recording: str, outdir: str, options: BatchOptions) -> dict:
-    """One recording: its outputs in ``OUTDIR/NAME/`` and its summary row. Never raises for a
+    """One recording: its outputs in ``OUTDIR/NAME/`` and its summary row, whose ``warnings`` are
+    those the task logged (``_on_ray`` logs them again where the user sees them). Never raises for a
     problem of the recording (the row's status says it); a bug keeps its exception."""
+    warnings = _Warnings()
+    log.addHandler(warnings)
+    try:
+        row = _task(recording, outdir, options)
+    finally:
+        log.removeHandler(warnings)
+    return {**row, "warnings": warnings.messages} if warnings.messages else row
+
+
+def _task(recording: str, outdir: str, options: BatchOptions) -> dict:
     rec = Path(recording)
     row = {"recording": str(rec), "status": "ok"}
     folder = output_folder(outdir, rec)
@@ -207,6 +231,8 @@ def _on_ray(recordings, outdir, options, address, progress) -> list:
         rows = []
         for ref in refs:
             rows.append(ray.get(ref))
+            for message in rows[-1].get("warnings", []):   # said in a worker whose log the driver does not show
+                log.warning("%s", message)
             progress(len(rows), len(recordings))
         return rows
     finally:

@@ -527,7 +527,8 @@ def batch(recordings, outdir, track, truth_from_sidecar, box, workers, ray_addre
                                  truth_from_sidecar)
     result = run_with_progress("recordings", run_batch, recordings, outdir, batch_options, workers=workers,
                                ray_address=ray_address)
-    _report([*table_lines(result.rows), f"{len(result.rows)} recordings in {result.seconds:.1f} s, {result.failed} "
+    count = f"{len(result.rows)} recording" + ("" if len(result.rows) == 1 else "s")
+    _report([*table_lines(result.rows), f"{count} in {result.seconds:.1f} s, {result.failed} "
              f"failed; wrote {result.summary}"])
     if result.failed == len(result.rows):
         raise AccumError(f"every recording failed (see the status column of {result.summary})")
@@ -581,6 +582,8 @@ def eval_(inputs, poses, as_json, position_tol, angle_tol, background_dist, min_
     tol = Tolerances(position_tol / 1000.0, angle_tol, background_dist / 1000.0, min_seen)
     figures = evaluate_file(inputs[0], inputs[1], tol, frames, support_face, plot)
     _report([dumps(figures, indent=1)] if as_json else figures_lines(figures), product=True)
+    if plot:
+        _wrote([plot])
 
 
 if __name__ == "__main__":

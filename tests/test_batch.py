@@ -44,13 +44,20 @@ def test_one_row_per_recording_and_failures_stay_in_their_row(recordings, tmp_pa
     assert (tmp_path / "summary.csv").read_text().splitlines() == lines
 
 
-def test_one_and_two_workers_and_ray_give_the_same_summary(recordings, tmp_path):
+def test_one_and_two_workers_and_ray_give_the_same_summary(recordings, tmp_path, caplog):
+    """The same summary whatever runs the tasks; a task's warnings reach the user from Ray's workers too (their
+    log stayed in the worker)."""
     pytest.importorskip("ray")
+    from . import helpers
+
+    unpaired = helpers.write(tmp_path / "unpaired.mcap", unpaired_right=(1,))   # warns: an image with no partner
     summaries = []
     for name, kwargs in (("one", dict(workers=1)), ("two", dict(workers=2)), ("ray", dict(ray_address="local"))):
-        run_batch(recordings[:2], tmp_path / name, OPTIONS, **kwargs)
+        caplog.clear()
+        run_batch([*recordings[:2], unpaired], tmp_path / name, OPTIONS, **kwargs)
         summaries.append((tmp_path / name / "summary.csv").read_text())
     assert summaries[0] == summaries[1] == summaries[2]
+    assert "has no partner" in caplog.text   # the Ray run's
     with pytest.raises(InputError, match="with --ray the cluster schedules"):   # it did nothing, silently
         run_batch(recordings[:2], tmp_path / "both", OPTIONS, workers=2, ray_address="local")
 
