@@ -461,6 +461,20 @@ def test_view_writes_rrd_and_png(small_recording, tmp_path):
     assert nothing.exit_code == 1 and "nothing to do: give --rrd" in nothing.output
 
 
+def test_view_warns_of_a_model_that_does_not_fit_the_images(small_recording, tf_tree_recording, tmp_path):
+    """A model of another object (the house of another recording) drawn at the recording's poses is named in a
+    warning, in the picture and in the Rerun view; the object's own model is not."""
+    model, other = tmp_path / "m.json", tmp_path / "house.json"
+    assert run("accumulate", small_recording, "-o", model).exit_code == 0
+    assert run("accumulate", tf_tree_recording, "-o", other).exit_code == 0
+    for outputs in (["--png", tmp_path / "v.png"], ["--rrd", tmp_path / "v.rrd"]):
+        own = run("view", small_recording, model, *outputs)
+        assert own.exit_code == 0 and "does not fit" not in own.output
+        foreign = run("view", small_recording, other, *outputs)
+        assert foreign.exit_code == 0
+        assert "house does not fit frame" in foreign.output and "a model of another object" in foreign.output
+
+
 def test_view_png_draws_every_model_and_the_truth(small_recording, tmp_path):
     """Every model of the inputs gets its panel (it drew the first alone), the truth's edges lie under each."""
     import cv2

@@ -161,12 +161,15 @@ def _log_to_rerun(inputs: ViewInputs, rrd, spawn, connect, options, frames, prog
         with options.open(inputs.recording, require_pose=False) as rec:
             total = frames.check(rec)
             inputs.check_tracks(rec.time_span_ns, options.tolerance_ns, inputs.recording)
+            checked = False
             for done, frame in enumerate(rec.frames(frames.start, frames.stop), 1):
                 T, source = inputs.pose_at(frame.timestamp_ns, frame.T_camera_object, options.tolerance_ns)
                 viz.recording_frame(frame, inputs.models, T, source, inputs.truth,
                                     inputs.truth_pose(frame.timestamp_ns))
                 if T is not None:
                     positions.append(T[:3, 3])
+                    if not checked:   # the first frame with a pose tells whether the models fit the images
+                        checked = _check_fit(inputs.models, frame, T)
                 progress(done, total)
     elif inputs.tracks:   # world = the camera frame: the models at the poses files' times and poses
         times = np.unique(np.concatenate([track.times_ns for track in inputs.tracks]))
@@ -207,6 +210,23 @@ def _log_to_rerun(inputs: ViewInputs, rrd, spawn, connect, options, frames, prog
     viz.close()
 
 
+def _check_fit(models: dict, frame, T_camera_object: np.ndarray) -> bool:
+    """Warn for each model (name -> Segments) that the frame's images do not show where the pose puts it:
+    refined from that pose, the tracker does not call it 'tracked' (a model of another object was drawn
+    at the recording's poses without a word; ``accum track`` refuses the pair). Returns True."""
+    from ..track import refine_pose
+
+    for name, model in models.items():
+        if not model.accepted.any():
+            continue
+        estimate = refine_pose(model, frame, T_camera_object)
+        if estimate.status != "tracked":
+            log.warning("%s does not fit frame %d's images at the pose shown (refined from it: %s, coverage %.2f of "
+                        "its visible segments): a model of another object, or of another object frame?", name,
+                        frame.index, estimate.status, estimate.coverage)
+    return True
+
+
 def middle_frame(frames, count: int) -> int:
     """The middle one of the frames ``frames`` (a ``FrameRange``) selects from a recording of ``count``."""
     stop = count if frames.stop is None else min(frames.stop, count)
@@ -241,6 +261,7 @@ def _draw_picture(inputs: ViewInputs, png, png_frame, frames, options) -> None:
                 why = "" if source == "recorded" else f" ({source})"
                 raise AccumError(f"{inputs.recording}: frame {wanted} has no pose to place the model{why}")
             (name, first), *others = named.items()
+            _check_fit(inputs.models, frame, T)
             write_png(png, render_frame_panel(frame, extract_frame(frame), first, T, truth_ends, dict(others), name))
             return
         raise AccumError(f"{inputs.recording}: no frame {wanted} (the recording has {rec.frame_count_hint})")
