@@ -221,9 +221,10 @@ def _check_fit(models: dict, frame, T_camera_object: np.ndarray) -> bool:
             continue
         estimate = refine_pose(model, frame, T_camera_object)
         if estimate.status != "tracked":
-            log.warning("%s does not fit frame %d's images at the pose shown (refined from it: %s, coverage %.2f of "
-                        "its visible segments): a model of another object, or of another object frame?", name,
-                        frame.index, estimate.status, estimate.coverage)
+            log.warning("%s does not fit frame %d's images at the pose shown (the tracker, refined from it: %s, %s): "
+                        "a model of another object, or of another object frame? (A model of other aspects of this "
+                        "object can also miss a frame.)", name, frame.index, estimate.status,
+                        estimate.reason or f"coverage {estimate.coverage:.2f}")
     return True
 
 
