@@ -12,6 +12,9 @@ from .runs.accumulation import TRACKED_PASSES
 
 def info_lines(summary, object_frame: str, camera_frame: str) -> list[str]:
     """``accum info``'s summary of a ``RecordingInfo``."""
+    if summary.topics_only:   # a topic is missing (the error that follows says which, and what to try)
+        return [f"recording    {summary.path}", f"tf frames    {', '.join(summary.tf_frames) or 'none'}",
+                *_topic_lines(summary.topics)]
     intr = summary.intrinsics
     seconds = ((summary.last_ns or 0) - (summary.first_ns or 0)) * 1e-9
     offset = f", left/right {summary.stereo_offset_ms:.3f} ms apart" if summary.stereo_offset_ms is not None else ""
@@ -37,12 +40,14 @@ def info_lines(summary, object_frame: str, camera_frame: str) -> list[str]:
                  " frames")
     lines += [f"             {count} frame(s): {reason}" for reason, count in summary.pose_problems]
     lines.append(f"tf frames    {', '.join(summary.tf_frames) or 'none'}")
-    lines.append("topics")
-    width = max([32] + [len(topic) + 1 for topic, _, _ in summary.topics])
-    kinds = max([28] + [len(schema) + 1 for _, schema, _ in summary.topics])
-    lines += [f"  {topic:<{width}} {schema:<{kinds}} {count if count is not None else '?':>6}"
-              for topic, schema, count in summary.topics]
-    return lines
+    return lines + _topic_lines(summary.topics)
+
+
+def _topic_lines(topics) -> list[str]:
+    width = max([32] + [len(topic) + 1 for topic, _, _ in topics])
+    kinds = max([28] + [len(schema) + 1 for _, schema, _ in topics])
+    return ["topics", *(f"  {topic:<{width}} {schema:<{kinds}} {count if count is not None else '?':>6}"
+                        for topic, schema, count in topics)]
 
 
 def info_json(summary) -> str:

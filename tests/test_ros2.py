@@ -99,13 +99,17 @@ def test_info_on_each_form(small_recording, ros_forms):
 
 
 def test_missing_default_topics_propose_the_ros_topics(ros_named_forms):
+    """info of a bag with other topic names lists its topics and transforms, then the error with the proposal
+    (it printed the error alone)."""
     proposal = ("try --left-topic /cam/left/image_raw --right-topic /cam/right/image_raw "
                 "--left-calibration-topic /cam/left/camera_info --right-calibration-topic /cam/right/camera_info")
     for path in ros_named_forms.values():
-        with pytest.raises(RecordingError) as e:
-            describe_recording(path)
-        assert "missing topic /stereo/left/image; this recording looks like ROS 2: " + proposal in str(e.value)
-        assert "/cam/left/camera_info" in str(e.value).split("topics found:")[1]
+        summary, problem = describe_recording(path)
+        assert isinstance(problem, RecordingError)
+        assert "missing topic /stereo/left/image; this recording looks like ROS 2: " + proposal in str(problem)
+        assert "/cam/left/camera_info" in str(problem).split("topics found:")[1]
+        assert summary.topics_only and ("/cam/left/image_raw", "sensor_msgs/msg/CompressedImage", 6) in summary.topics
+        assert summary.tf_frames == ["camera_left", "gripper"]
 
 
 def test_proposal_prefers_raw_images_and_finds_compressed_ones(tmp_path):

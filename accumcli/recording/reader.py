@@ -173,6 +173,7 @@ class RecordingInfo:
     pairing_tolerance_ms: int | None = None
     lost_bytes: int = 0
     size_problem: str | None = None   # the images' own size differs from their calibration's
+    topics_only: bool = False   # the topics accum reads are not all there: only the topics and transforms are known
 
 
 @dataclass
@@ -302,7 +303,12 @@ class Recording:
         # camera_info: rectifying them again with its D and R gave a model of precision 0.014
         self.images_rectified = all(_is_rect_topic(t) for t in (topics.left_image, topics.right_image))
         self._index()
-        self._check_topics(require_pose)
+        try:
+            self._check_topics(require_pose)
+        except RecordingError as e:   # what the recording holds, for ``accum info`` to show beside the error
+            e.info = RecordingInfo(path=self.path, topics=self._topic_counts(), tf_frames=sorted(self.tree.frames),
+                                   topics_only=True)
+            raise
         self._check_calibrations()
         self._check_image_frame()
         if require_pose:
@@ -699,13 +705,17 @@ class Recording:
         broadcasters, a restarted driver)."""
         return sum(self.message_counts.get(c.id, 0) for c in self._channels_seen.values() if c.topic == topic)
 
+    def _topic_counts(self) -> list[tuple[str, str, int]]:
+        """(topic, schema name, messages) of every topic, by name."""
+        return [(c.topic, c.schema_name, self._message_count(c.topic))
+                for c in sorted(self._channels.values(), key=lambda c: c.topic)]
+
     def info(self) -> RecordingInfo:
         """Scan the recording (no pixel decoding) for ``accum info``."""
         info = RecordingInfo(path=self.path, stereo_offset_ms=None if self.stereo_offset_ns is None
                              else self.stereo_offset_ns * 1e-6, pairing_tolerance_ms=self.pairing_tolerance_ms,
                              lost_bytes=self.lost_bytes)
-        for channel in sorted(self._channels.values(), key=lambda c: c.topic):
-            info.topics.append((channel.topic, channel.schema_name, self._message_count(channel.topic)))
+        info.topics = self._topic_counts()
         info.tf_frames = sorted(self.tree.frames)
         info.calibrations = len(self.calibrations["left"])
         info.unpaired_images = self.unpaired_count
