@@ -30,7 +30,7 @@ from .cli_options import (
     frame_workers_option,
     workers_option,
 )
-from .errors import AccumError
+from .errors import AccumError, InputError
 from .outputs import (caused_by_interrupt, descriptor_of, interrupt_received, names_open_file,
                       raise_pending_interrupt)
 
@@ -205,16 +205,13 @@ _OUTPUT_PATH = dict(type=click.Path(dir_okay=False, allow_dash=True), callback=_
 
 
 def _check_formats(outputs, suffixes: tuple) -> None:
-    """Each output names its format by one of ``suffixes``; a stream (stdout, ``-``) cannot."""
-    expected = (f"expected a {', '.join(suffixes[:-1])} or {suffixes[-1]} file" if len(suffixes) > 1
-                else f"expected a name ending in {suffixes[0]}")
-    for path in outputs:
-        if not path.lower().endswith(suffixes):
-            # '-' became /dev/stdout: name what the user may have typed
-            found = ("the standard output (- or /dev/stdout)" if path == "/dev/stdout" else
-                     f"the stream {path}" if descriptor_of(path) is not None else repr(path))
-            why = ", which has no name to tell the format by: write a file" if descriptor_of(path) is not None else ""
-            raise click.BadParameter(f"{expected}, found {found}{why}", param_hint="--output")
+    """Each output names its format by one of ``suffixes`` (the library's check, as an option's error)."""
+    from .runs.base import check_output_kinds
+
+    try:
+        check_output_kinds(outputs, suffixes)
+    except InputError as e:
+        raise click.BadParameter(str(e), param_hint="--output") from None
 
 
 output_option = functools.partial(click.option, "-o", "--output", **_OUTPUT_PATH)
@@ -395,8 +392,9 @@ def accumulate(recording, outputs, ply_all, rrd, truth, history, plot, png, pane
     from .pipeline import AccumulateParams
     from .report import accumulation_lines
     from .runs import accumulate_recording
+    from .runs.base import MODEL_OUTPUTS
 
-    _check_formats(outputs, (".json", ".ply", ".mcap"))
+    _check_formats(outputs, MODEL_OUTPUTS)
     line_model = LineModelParams(thresholds=MetricThresholds(position_threshold / 1000.0, angle_threshold),
                                  view_planes=view_planes)
     params = AccumulateParams(extract=extract_params, line_model=line_model, motion=motion, box=box)
@@ -442,8 +440,9 @@ def track(model_file, recording, outputs, init_pose, rrd, reacquire, poses_topic
     """
     from .report import tracking_lines
     from .runs import track_recording
+    from .runs.base import POSES_OUTPUTS
 
-    _check_formats(outputs, (".json", ".tum", ".mcap"))
+    _check_formats(outputs, POSES_OUTPUTS)
     result = run_with_progress("tracking", track_recording, model_file, recording, outputs, init_pose=init_pose,
                                extract_params=extract_params, options=options, frames=frames,
                                reacquire=reacquire, rrd=rrd, poses_topic=poses_topic,

@@ -786,3 +786,4 @@ def test_frames_without_a_pose_at_their_times_are_one_reason_with_a_word_on_the_
             "--time-offset-ms 1749998765801") in message
     near = {"a -> b: time 10.000 s is outside the transform samples [10.500, 20.000] s": 1}
     assert "clocks" not in str(nothing_done("bag", "nothing", near))
+

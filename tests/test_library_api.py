@@ -40,3 +40,13 @@ def test_the_library_refuses_bad_arguments_as_the_cli_does():
     with pytest.raises(InputError, match="disagree in length"):
         checked_segments(Segments("o", np.zeros((2, 3)), np.ones((1, 3)), np.ones(2), np.ones(2),
                                   np.ones(2, np.int64)), "m")
+
+
+def test_the_runs_refuse_an_output_that_names_no_format(small_recording, tmp_path):
+    """The CLI refused -o model.txt; the library wrote it as JSON without a word. Now both refuse it."""
+    from accumcli.runs import accumulate_recording, track_recording
+
+    with pytest.raises(InputError, match=r"expected a \.json, \.ply or \.mcap file, found '.*model\.txt'"):
+        accumulate_recording(small_recording, [str(tmp_path / "model.txt")])
+    with pytest.raises(InputError, match=r"expected a \.json, \.tum or \.mcap file, found the standard output"):
+        track_recording(str(tmp_path / "model.json"), small_recording, ["-"])

@@ -26,8 +26,8 @@ from ..row_check import RowCheck
 from ..motion_check import MotionCheck
 from ..segments import Segments
 from ..surface import faces_of
-from .base import (FrameRange, Progress, RecordingOptions, frame_range, in_frames, no_progress, nothing_done,
-                   path_list)
+from .base import (MODEL_OUTPUTS, FrameRange, Progress, RecordingOptions, check_output_kinds, frame_range, in_frames,
+                   no_progress, nothing_done, path_list)
 from .checks import check_same_time, check_truth_matches, check_truth_poses
 from .frame_logs import rerun_log, scene_log
 from .parallel import extracted_frames, resolve_workers
@@ -90,6 +90,7 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
     ``RecordingError`` for a recording that cannot be used).
     """
     outputs, frames = path_list(outputs, "outputs"), frame_range(frames)
+    check_output_kinds(outputs, MODEL_OUTPUTS)
     if ply_all and not any(str(path).lower().endswith(".ply") for path in outputs):
         raise InputError("--all chooses what a .ply output holds, and no .ply output is given")
     files = OutputSet([*outputs, history, plot, rrd, png, panel], inputs=[recording, truth])

@@ -167,6 +167,27 @@ def in_frames(frames: "FrameRange") -> str:
     return "" if frames == FrameRange() else f" in frames {frames}"
 
 
+MODEL_OUTPUTS = (".json", ".ply", ".mcap")    # what accumulate writes, by the output's name
+POSES_OUTPUTS = (".json", ".tum", ".mcap")    # what track writes
+
+
+def check_output_kinds(outputs, suffixes: tuple[str, ...]) -> None:
+    """``InputError`` unless each output names its format by one of ``suffixes`` (lower-case
+    extensions); a stream (stdout, ``-``, a descriptor) cannot: a model.txt, or a typo's model.jsn, was
+    written as JSON by the library without a word."""
+    from ..outputs import descriptor_of
+
+    expected = (f"expected a {', '.join(suffixes[:-1])} or {suffixes[-1]} file" if len(suffixes) > 1
+                else f"expected a name ending in {suffixes[0]}")
+    for path in outputs:
+        if not str(path).lower().endswith(suffixes):
+            stream = descriptor_of(path) is not None
+            found = ("the standard output (- or /dev/stdout)" if str(path) in ("-", "/dev/stdout") else
+                     f"the stream {path}" if stream else repr(str(path)))
+            why = ", which has no name to tell the format by: write a file" if stream else ""
+            raise InputError(f"{expected}, found {found}{why}")
+
+
 def path_list(paths, what: str) -> list:
     """The paths of one path (a ``str`` or ``os.PathLike``: one path, not its characters) or of an
     iterable of them (None: none); ``InputError`` for anything else."""

@@ -19,7 +19,8 @@ from ..recording.tf_tree import frame_name
 from ..segments import Segments
 from ..track import PoseEstimate, PoseTracker, TrackParams
 from ..tum import write_poses_tum
-from .base import FrameRange, Progress, RecordingOptions, frame_range, in_frames, no_progress, nothing_done, path_list
+from .base import (POSES_OUTPUTS, FrameRange, Progress, RecordingOptions, check_output_kinds, frame_range, in_frames,
+                   no_progress, nothing_done, path_list)
 from .frame_logs import rerun_log
 
 log = logging.getLogger("accumcli")
@@ -77,6 +78,7 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
     ``AccumError`` (``InputError``, ``RecordingError``).
     """
     outputs, frames = path_list(outputs, "outputs"), frame_range(frames)
+    check_output_kinds(outputs, POSES_OUTPUTS)
     for name, value in (("poses_topic", poses_topic), ("poses_child_frame", poses_child_frame)):
         if value is not None and not (isinstance(value, str) and value.strip()):
             raise InputError(f"{name} (--{name.replace('_', '-')}): expected a name, found {value!r}")
