@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import replace
 
 import click
 
@@ -113,10 +112,11 @@ def recording_options(func):
         from .recording import Topics
         from .runs import RecordingOptions
 
+        tf = kwargs.pop("tf_topic")
         topics = Topics(left_image=kwargs.pop("left_topic"), right_image=kwargs.pop("right_topic"),
                         left_calibration=kwargs.pop("left_calibration_topic"),
-                        right_calibration=kwargs.pop("right_calibration_topic"), tf=kwargs.pop("tf_topic"))
-        topics = replace(topics, tf_static=kwargs.pop("tf_static_topic") or f"{topics.tf}_static")
+                        right_calibration=kwargs.pop("right_calibration_topic"), tf=tf,
+                        tf_static=kwargs.pop("tf_static_topic") or f"{tf}_static")
         kwargs["options"] = RecordingOptions(topics, kwargs.pop("camera_frame"), kwargs.pop("object_frame"),
                                              int(round(kwargs.pop("tolerance_ms") * 1e6)),
                                              int(round(kwargs.pop("time_offset_ms") * 1e6)))

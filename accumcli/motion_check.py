@@ -153,13 +153,12 @@ class MotionCheck:
         wanted = times[:, None] + OFFSETS_MS[None, :] * 1e6          # (frames, offsets), ns from the first
         inside = (wanted >= times[0]) & (wanted <= times[-1])
         shifted = np.full(wanted.shape + (4, 4), np.nan)
-        if inside.any() and (np.diff(times) > 0).all():
-            at = wanted[inside]
-            rotation = Slerp(times, Rotation.from_matrix(poses[:, :3, :3]))(at).as_matrix()
-            translation = np.column_stack([np.interp(at, times, poses[:, i, 3]) for i in range(3)])
-            block = np.zeros((len(at), 4, 4))
-            block[:, :3, :3], block[:, :3, 3], block[:, 3, 3] = rotation, translation, 1.0
-            shifted[inside] = block
+        at = wanted[inside]   # offset 0 is inside, and ``add`` keeps the stamps increasing: Slerp's needs
+        rotation = Slerp(times, Rotation.from_matrix(poses[:, :3, :3]))(at).as_matrix()
+        translation = np.column_stack([np.interp(at, times, poses[:, i, 3]) for i in range(3)])
+        block = np.zeros((len(at), 4, 4))
+        block[:, :3, :3], block[:, :3, 3], block[:, 3, 3] = rotation, translation, 1.0
+        shifted[inside] = block
         for gap in OFFSET_GAPS:
             for a in range(len(self._timed) - gap):
                 b = a + gap

@@ -24,7 +24,7 @@ def info_lines(summary, object_frame: str, camera_frame: str) -> list[str]:
     paired = 2 * summary.stereo_frames
     if summary.unpaired_images > 0.1 * (paired + summary.unpaired_images) and summary.stereo_offset_ms:
         # unsynchronised cameras: a tolerance above nearly every measured offset
-        tolerance = max(1, summary.pairing_tolerance_ms or int(np.ceil(2 * summary.stereo_offset_ms)))
+        tolerance = summary.pairing_tolerance_ms   # at least 1, set wherever an offset was measured
         lines.append(f"pairing      {summary.unpaired_images} images found no partner within the pairing tolerance: "
                      f"if the two cameras are not synchronised, try --tolerance-ms {tolerance}")
     if summary.lost_bytes:

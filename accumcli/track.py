@@ -926,6 +926,10 @@ def slides(accepted: Segments, distinct_m: float, max_m: float = 0.04, step_m: f
     return out
 
 
+CLIMB_STEPS = 3      # a user's --init moves to a better-covered twin at most this many times ...
+CLIMB_ALIKE = 0.02   # ... each covering more than this more; twins within it are rivals
+
+
 @dataclass
 class PoseTracker:
     """Follows the object through a sequence (see the module docstring)."""
@@ -1038,23 +1042,22 @@ class PoseTracker:
             twins.append(twin)
         return twins
 
-    def _climb_twins(self, given: PoseEstimate, frame: StereoFrame, grads, steps: int = 3,
-                     alike: float = 0.02) -> list[PoseEstimate]:
+    def _climb_twins(self, given: PoseEstimate, frame: StereoFrame, grads) -> list[PoseEstimate]:
         """The refinement of a user's starting pose (``given``) moved to its twin (``_twins``, slides
-        along every axis) while one covers more than ``alike`` more (up to ``steps`` times), first; then
-        the twins that cover about as much (within ``alike``): rivals in ``decide``. An ``--init`` one
+        along every axis) while one covers more than ``CLIMB_ALIKE`` more (up to ``CLIMB_STEPS`` times),
+        first; then the twins that cover about as much (within ``CLIMB_ALIKE``): rivals in ``decide``. An ``--init`` one
         chessboard square (25 mm) off verified there at a coverage of 0.70, the right pose one slide away
         covers 0.91; two squares off takes two steps. Twins that cover less are no rivals: a square off
         the right pose covers 0.08 less, and as rivals they made a right ``--init`` ambiguous on 8 of
         the chessboard's 13 frames."""
         best = given
-        for _ in range(steps + 1):
+        for step in range(CLIMB_STEPS + 1):
             twins = self._twins(best, frame, grads, every_axis=True)
-            better = [t for t in twins if t.coverage > best.coverage + alike]
-            if not better or _ == steps:
+            better = [t for t in twins if t.coverage > best.coverage + CLIMB_ALIKE]
+            if not better or step == CLIMB_STEPS:
                 break
             best = max(better, key=_rank)
-        return [best] + [t for t in twins if t is not best and t.coverage >= best.coverage - alike]
+        return [best] + [t for t in twins if t is not best and t.coverage >= best.coverage - CLIMB_ALIKE]
 
     def _pin_unconfirmed(self, candidates: list[PoseEstimate], methods: tuple[str, ...], how: str) -> None:
         """Makes 'lost' the verified ``candidates`` found by ``methods`` that are not pinned to
@@ -1144,8 +1147,9 @@ class PoseTracker:
                     candidates.append(found)
         if T_guess is None:
             candidates += self._carried(candidates, frame, grads)
-        elif candidates and rough_guess:
-            candidates = self._climb_twins(candidates[0], frame, grads) + candidates
+        elif candidates and rough_guess:   # the given pose once: judged twice, it was one candidate anyway
+            climbed = self._climb_twins(candidates[0], frame, grads)
+            candidates = climbed + [c for c in candidates if c is not climbed[0]]
         if T_guess is not None and p.calibrate_limits and not self._calibrated:
             self._calibrated = True
             if candidates[0].coverage >= p.min_coverage:   # the given pose fits the images: learn from it

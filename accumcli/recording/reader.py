@@ -197,7 +197,6 @@ class _Pairing:
         self.recent = {True: deque(maxlen=8), False: deque(maxlen=8)}
         self.offsets: list[int] = []
         self.left_gaps: list[int] = []    # between consecutive left stamps: the frame period
-        self._last_left: int | None = None
 
     def _offset(self, is_left: bool, t_ns: int) -> None:
         others = self.recent[not is_left]
@@ -206,11 +205,10 @@ class _Pairing:
 
     def add(self, topic: str, item: _PendingImage) -> list[tuple[_PendingImage, _PendingImage]]:
         is_left = topic == self.left_topic
+        last_left = self.recent[True][-1] if self.recent[True] else None
+        if is_left and last_left is not None and item.t_ns > last_left and len(self.left_gaps) < OFFSET_SAMPLES:
+            self.left_gaps.append(item.t_ns - last_left)
         self.recent[is_left].append(item.t_ns)
-        if is_left:
-            if self._last_left is not None and item.t_ns > self._last_left and len(self.left_gaps) < OFFSET_SAMPLES:
-                self.left_gaps.append(item.t_ns - self._last_left)
-            self._last_left = item.t_ns
         partners = self.pending[not is_left]
         while partners and partners[0].t_ns < item.t_ns - self.tolerance_ns:
             self._give_up(not is_left, partners.popleft())
@@ -577,8 +575,7 @@ class Recording:
         others = sorted(topic for topic in self._channels if topic.endswith("tf_static") and topic != static)
         if others:
             return f"; the recording has {others[0]}: try --tf-static-topic {others[0]}"
-        channel = self._channels.get(static)
-        if channel is None or not self._message_count(static):
+        if not self._message_count(static):
             return (f"; {static} has no message here (a split bag records it in its first file only: give the "
                     + "bag's folder, which holds all its files)")
         return ""

@@ -191,9 +191,11 @@ def split_bag_files(folder: str) -> list[str]:
         return []
     bags = [n for n in names if n.endswith(".bag") and not n.endswith(".orig.bag")   # rosbag reindex's backup
             and os.path.isfile(os.path.join(folder, n))]
-    number = re.compile(r"(\d+)\.bag$")
-    return [os.path.join(folder, n) for n in sorted(bags, key=lambda n: (int(number.search(n).group(1))
-                                                                          if number.search(n) else -1, n))]
+    def order(name):   # by the number before .bag, then by name
+        found = re.search(r"(\d+)\.bag$", name)
+        return (int(found.group(1)) if found else -1, name)
+
+    return [os.path.join(folder, n) for n in sorted(bags, key=order)]
 
 
 def unfinished_bag_files(folder: str) -> list[str]:
@@ -223,8 +225,9 @@ class RosbagScan:
     """One pass over a rosbag2 folder or ``.db3``, or a ROS 1 ``.bag`` (``kind`` 'rosbag1'), with
     ``rosbags``, with ``McapScan``'s interface: ``messages()`` yields ``_Message`` in the bag's time
     order, ``channels`` fills as the bag opens; ``decoder(channel)`` gives bytes -> Foxglove protobuf
-    message. A bag ``rosbags`` cannot open is a ``RecordingError``; the damage fields stay empty
-    (rosbags reads whole files or fails). ROS 1 messages are decoded with the Noetic types and the
+    message. A bag ``rosbags`` cannot open is a ``RecordingError``; one damaged further on (a bad
+    compressed chunk, a damaged storage file) is read up to the damage: ``footer`` False and ``broken``
+    the reason, as ``McapScan`` says it. ROS 1 messages are decoded with the Noetic types and the
     definitions the bag carries (its connections'), ``tf/tfMessage`` as ``tf2_msgs/TFMessage``, and
     CameraInfo's ``D, K, R, P`` as ROS 2's ``d, k, r, p``."""
 

@@ -4,7 +4,7 @@ as a picture."""
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -124,52 +124,47 @@ def view(paths, *, rrd=None, spawn: bool = False, connect: str | None = None, pn
         raise InputError(f"--png-frame {png_frame} lies outside --frames {frames}")
     inputs = ViewInputs.of(paths)
     named = {m.frame_id for m in inputs.models.values() if m.frame_id}
-    if object_frame_of_model and inputs.recording and len(named) == 1 and options.object_frame not in named:
-        options = _models_frame(inputs.recording, options, named.pop())
+    model_frame = named.pop() if object_frame_of_model and len(named) == 1 else None
     files = OutputSet([rrd, png], inputs=paths)
     with files:
         if rrd or spawn or connect:
-            _log_to_rerun(inputs, files.path(rrd) if rrd else None, spawn, connect, options, frames, progress)
+            _log_to_rerun(inputs, files.path(rrd) if rrd else None, spawn, connect, options, frames, progress,
+                          model_frame)
         if png:
-            _draw_picture(inputs, files.open(png, "wb"), png_frame, frames, options)
+            _draw_picture(inputs, files.open(png, "wb"), png_frame, frames, options, model_frame)
     return [str(p) for p in (rrd, png) if p]
 
 
-def _models_frame(recording, options: RecordingOptions, frame: str) -> RecordingOptions:
-    """``options`` with the object frame the models name, where the recording's tree has it (a model
-    of another object keeps ``options.object_frame``, and so the recording's poses). This look is
-    silent: the recording's own warnings come once, from the opening that shows it."""
-    quiet = logging.getLogger("accumcli")
-    was, quiet.disabled = quiet.disabled, True
-    try:
-        with options.open(recording, require_pose=False) as rec:
-            if frame not in rec.tree.frames:
-                return options
-    finally:
-        quiet.disabled = was
-    log.info("the object's frame is the model's: %s (--object-frame shows it in another)", frame)
-    return replace(options, object_frame=frame)
+def _open(recording, options: RecordingOptions, model_frame: str | None):
+    """The recording, its poses those of the object frame the models name (``model_frame``) where its
+    tree has that frame (a model of another object keeps ``options.object_frame``, and so the
+    recording's poses); the frame is chosen on the opening that reads the recording anyway (a look of
+    its own read the whole file once more)."""
+    rec = options.open(recording, require_pose=False)
+    if model_frame and model_frame != rec.object_frame and model_frame in rec.tree.frames:
+        log.info("the object's frame is the model's: %s (--object-frame shows it in another)", model_frame)
+        rec.object_frame = model_frame
+    return rec
 
 
-def _log_to_rerun(inputs: ViewInputs, rrd, spawn, connect, options, frames, progress) -> None:
+def _log_to_rerun(inputs: ViewInputs, rrd, spawn, connect, options, frames, progress, model_frame=None) -> None:
     from ..visualize import RerunLog, model_path
 
     viz = RerunLog("accum view", rrd=rrd, kind="view", spawn=spawn, connect=connect,
                    images=inputs.recording is not None)
     positions = []
     if inputs.recording:
-        with options.open(inputs.recording, require_pose=False) as rec:
+        with _open(inputs.recording, options, model_frame) as rec:
             total = frames.check(rec)
             inputs.check_tracks(rec.time_span_ns, options.tolerance_ns, inputs.recording)
-            checked = False
             for done, frame in enumerate(rec.frames(frames.start, frames.stop), 1):
                 T, source = inputs.pose_at(frame.timestamp_ns, frame.T_camera_object, options.tolerance_ns)
                 viz.recording_frame(frame, inputs.models, T, source, inputs.truth,
                                     inputs.truth_pose(frame.timestamp_ns))
                 if T is not None:
+                    if not positions:   # the first frame with a pose tells whether the models fit the images
+                        _check_fit(inputs.models, frame, T)
                     positions.append(T[:3, 3])
-                    if not checked:   # the first frame with a pose tells whether the models fit the images
-                        checked = _check_fit(inputs.models, frame, T)
                 progress(done, total)
     elif inputs.tracks:   # world = the camera frame: the models at the poses files' times and poses
         times = np.unique(np.concatenate([track.times_ns for track in inputs.tracks]))
@@ -210,16 +205,17 @@ def _log_to_rerun(inputs: ViewInputs, rrd, spawn, connect, options, frames, prog
     viz.close()
 
 
-def _check_fit(models: dict, frame, T_camera_object: np.ndarray) -> bool:
+def _check_fit(models: dict, frame, T_camera_object: np.ndarray, gradients=None) -> None:
     """Warn for each model (name -> Segments) that the frame's images do not show where the pose puts it:
     refined from that pose, the tracker does not call it 'tracked' (a model of another object was drawn
-    at the recording's poses without a word; ``accum track`` refuses the pair). Returns True."""
+    at the recording's poses without a word; ``accum track`` refuses the pair). ``gradients``: the
+    frame's, if its extraction computed them already."""
     from ..track import refine_pose
 
     for name, model in models.items():
         if not model.accepted.any():
             continue
-        estimate = refine_pose(model, frame, T_camera_object)
+        estimate = refine_pose(model, frame, T_camera_object, gradients=gradients)
         if estimate.status != "tracked":
             log.warning("%s does not fit frame %d's images at the pose shown (the tracker, refined from it: %s, %s): "
                         "a model of another object, or of another object frame? (A model of other aspects of this "
@@ -230,11 +226,10 @@ def _check_fit(models: dict, frame, T_camera_object: np.ndarray) -> bool:
 
 def middle_frame(frames, count: int) -> int:
     """The middle one of the frames ``frames`` (a ``FrameRange``) selects from a recording of ``count``."""
-    stop = count if frames.stop is None else min(frames.stop, count)
-    return frames.start + max(stop - frames.start, 0) // 2
+    return frames.start + frames.count_in(count) // 2
 
 
-def _draw_picture(inputs: ViewInputs, png, png_frame, frames, options) -> None:
+def _draw_picture(inputs: ViewInputs, png, png_frame, frames, options, model_frame=None) -> None:
     """The model alone, or (with a recording) one frame, its extraction and the model, as in the paper:
     ``png_frame``, or the middle one of ``frames`` (a ``FrameRange``)."""
     from ..extract import extract_frame
@@ -253,7 +248,7 @@ def _draw_picture(inputs: ViewInputs, png, png_frame, frames, options) -> None:
         write_png(png, render_model(*named.values(), truth_ends=truth_ends) if len(named) == 1
                   else render_models(named, truth_ends=truth_ends))
         return
-    with options.open(inputs.recording, require_pose=False) as rec:
+    with _open(inputs.recording, options, model_frame) as rec:
         inputs.check_tracks(rec.time_span_ns, options.tolerance_ns, inputs.recording)
         wanted = png_frame if png_frame is not None else middle_frame(frames, rec.frame_count_hint)
         for frame in rec.frames(wanted, wanted + 1):
@@ -262,7 +257,8 @@ def _draw_picture(inputs: ViewInputs, png, png_frame, frames, options) -> None:
                 why = "" if source == "recorded" else f" ({source})"
                 raise AccumError(f"{inputs.recording}: frame {wanted} has no pose to place the model{why}")
             (name, first), *others = named.items()
-            _check_fit(inputs.models, frame, T)
-            write_png(png, render_frame_panel(frame, extract_frame(frame), first, T, truth_ends, dict(others), name))
+            extraction = extract_frame(frame)
+            _check_fit(inputs.models, frame, T, extraction.gradients)   # the extraction's gradients, not again
+            write_png(png, render_frame_panel(frame, extraction, first, T, truth_ends, dict(others), name))
             return
         raise AccumError(f"{inputs.recording}: no frame {wanted} (the recording has {rec.frame_count_hint})")
