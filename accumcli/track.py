@@ -69,7 +69,14 @@ and no frame is falsely tracked.
 On dev_steps_track, where objects turn up to 8 degrees a frame, the refinement stopped in a minimum
 5.9 degrees from the truth in frames 29 to 31, from which the truth's own refinement stays put; the
 restarts took its tracked share from 0.950 to 1.000, and the tracking scoreboard kept no false
-frame and the wrong model lost everywhere. Whenever none of these is verified, and
+frame and the wrong model lost everywhere. The restarts also run in the frame after an 'ambiguous'
+one, whose poses are all undetermined, and ``decide`` treats that frame as a search (``unresolved``):
+with the models of an extraction not kept (pieces from 8 px), dev_steps_track's frame after an
+ambiguous one verified the wrong minimum 3.5 deg off at 0.58 px, refined from the prediction, while
+the refinement carried from the right pose slid off; the restarts found the truth at 0.37 px (then
+'ambiguous': the wrong one still covers within the margin); on sim_206 a carried pose verified 3.8
+and then 6.7 deg off, where a near-miss rival now makes it 'ambiguous'. With today's models the
+tracking scoreboard is the same to the digit. Whenever none of these is verified, and
 always when there is no tracked frame yet or the last one is more than
 ``max_gap_s`` ago (snapshots, not video: no prediction holds), it re-acquires by
 RANSAC over 3D-3D segment correspondences (``ransac_pose``). The angle and the distance
@@ -842,14 +849,16 @@ def _apart(A: np.ndarray, B: np.ndarray, params: TrackParams) -> bool:
     return rotation > params.distinct_deg or translation > params.distinct_m
 
 
-def decide(candidates: list[PoseEstimate], params: TrackParams = TrackParams()) -> PoseEstimate | None:
+def decide(candidates: list[PoseEstimate], params: TrackParams = TrackParams(),
+           unresolved: bool = False) -> PoseEstimate | None:
     """The best of ``candidates`` (by ``_rank``; None if none has a finite pose) with its ``margin``:
     its coverage minus that of the best rival, a candidate at a distinct pose (more than
     ``distinct_deg`` or ``distinct_m`` away; 0 when there is none). Rivals are the verified
     candidates, and those that the images show about as well (they pass the image checks of
     ``judge`` with ``rival_slack`` on the RMS, and half of it on the inlier share, whatever their
     standard deviations) and that neither the motion nor 3D support ``refuted``: every such one
-    where the best was found searching after nothing verified ('wide', 'restart'), and such
+    where the best was found searching after nothing verified ('wide', 'restart') or the frame before
+    was 'ambiguous' (``unresolved``: no pose of it was determined, so none continues it), and such
     symmetric twins ('symmetry') and refinements from the last ambiguous frame's poses ('carried')
     always. Found with the models of experiments not kept: a
     re-acquisition slid 10.3 mm along a model's parallel edges verified at coverage 0.895 while its
@@ -866,7 +875,7 @@ def decide(candidates: list[PoseEstimate], params: TrackParams = TrackParams()) 
     ranked = sorted(finite, key=_rank, reverse=True)
     best = ranked[0]
     rivals = []
-    exploring = best.method in ("wide", "restart")
+    exploring = unresolved or best.method in ("wide", "restart")
     near_miss = replace(params, max_rms_px=params.max_rms_px * (1 + params.rival_slack),
                         min_inlier_fraction=params.min_inlier_fraction - params.rival_slack / 2)
     for other in sorted(ranked[1:], key=lambda c: c.coverage, reverse=True):
@@ -1168,7 +1177,7 @@ class PoseTracker:
             wide.method = "wide"
             candidates.append(wide)
             candidates += self._restarts(candidates, frame, grads)
-        elif not reacquiring and self._suspect(candidates):
+        elif not reacquiring and (self._suspect(candidates) or self._undecided):
             candidates += self._restarts(candidates, frame, grads, levels=3)
             if p.suspect_is_lost and self._suspect(candidates):
                 best = max(candidates, key=_rank)
@@ -1214,7 +1223,7 @@ class PoseTracker:
                 c.refuted = True
                 if c.status == "tracked":
                     c.status, c.reason = "lost", why
-        best = decide(candidates, p)
+        best = decide(candidates, p, unresolved=bool(self._undecided))
         if best is None:
             best = PoseEstimate(np.full((4, 4), np.nan), float("inf"), 0, 0, "lost",
                                 reason="no pose to start from (no guess, no tracked frame before)")

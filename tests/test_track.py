@@ -420,6 +420,12 @@ def test_a_restart_must_beat_the_unverified_poses_too():
     carried = _estimate(turned, 0.53, "lost")  # refined from a pose of the last ambiguous frame: as a twin
     carried.method = "carried"
     assert decide([_estimate(T_FRONT, 0.52), carried]).status == "ambiguous"
+    # after an ambiguous frame no pose continues a determined one: a near miss from the prediction is a rival
+    after = decide([_estimate(T_FRONT, 0.60), _estimate(turned, 0.56, "lost")], unresolved=True)
+    assert after.status == "ambiguous" and np.array_equal(after.alternatives[0][0], turned)
+    far_off = _estimate(turned, 0.56, "lost")
+    far_off.residual_px = 2.0                  # ... but not one the images fail clearly
+    assert decide([_estimate(T_FRONT, 0.60), far_off], unresolved=True).status == "tracked"
     # the best rival by coverage: a lost pose 1 deg from a verified rival covering less is not hidden by it
     restart = _estimate(T_FRONT, 0.60)
     restart.method = "restart"
