@@ -14,8 +14,8 @@ a line's votes to pile up in a +-3 deg window: short and crowded edges are lost.
    ``CHAIN_MAX_RESIDUAL_PX`` from the chord between its ends is cut there (at its corner, whose
    own pixels are dropped), repeatedly (``CHAIN_SPLITS`` rounds, only the chains cut are looked
    at again; ``straight_chains``).
-4. Local pieces (``lines2d.local_segments``): runs of support along each straight chain spanning
-   ``chain_min_support_px`` of pixels are tiled by ``ceil(R / L)`` equal pieces (L =
+4. Local pieces (``lines2d.local_segments``): on each straight chain spanning ``chain_min_support_px``
+   of pixels, runs of support spanning ``piece_min_support_px`` are tiled by ``ceil(R / L)`` equal pieces (L =
    ``segment_length_px``; a run shorter than L is one piece of its own length), each on the
    chain's own line fit (orientation from the whole chain, position at the piece's pixels), ends
    extended to meeting lines' corners (``junction_radius_px``), refined on the gradient.
@@ -27,8 +27,18 @@ a line's votes to pile up in a +-3 deg window: short and crowded edges are lost.
 Choices where the task is vague: chains are linked by gradient agreement between neighbours,
 not traced pixel by pixel (the links are found vectorised; their components and cuts in a small
 compiled kernel, ``chain_kernel``);
-runs under 10 px of support are dropped by default, because on the suite their 3D was mostly
-wrong (single-frame near-object precision 0.73 with them, 0.80 without, on the devset's median).
+straight chains under 10 px are dropped, and pieces under 8 px on the longer ones. Measured on
+``make suite`` (medians, worst row in brackets), against 10 px for both: completeness 0.576 (0.257)
+-> 0.609 (0.269), edge length right in two single frames 0.661 -> 0.735, precision 0.980 -> 0.971
+(rows under 0.95: 2 -> 3, sim_106 at 0.947), single-frame near-object precision 0.790 -> 0.766; the
+real teabox's surface precision / completeness 0.609 / 0.646 -> 0.595 / 0.663; with the plane sigma
+of short lines (``stereo.triangulate``), without which precision rows under 0.95 were 4 and the
+teabox 0.572 / 0.660. Tracking with these models (``benchmarks/track_suite.py``): no false frame,
+tracked median 0.950 -> 0.933 (dev_steps 60 -> 57 of 60, two of them 'ambiguous'; the teabox 38 ->
+37 of 40); the accumulation's pairs per second median 27.7 -> 28.0, worst 12.1 -> 7.9 (sim_108,
+whose cloudy background gives three times the pieces). Pieces from 6 px: completeness 0.629
+(0.266) but precision 0.962 with six rows under 0.95; chains cut at 6 px too: 0.625 and the teabox
+0.558 / 0.516 (the chains' cut, not the pieces', loses on the real recording).
 """
 
 from __future__ import annotations
@@ -125,7 +135,7 @@ def detect_chains(image: np.ndarray, params: LineParams, grad: Gradients | None 
     line_of_chain = collinear_lines(points, chains, 2 * params.junction_radius_px)
     t0 = times.add("lines", t0)  # the line-finding stage (whatever the detector), for comparable breakdowns
     segments = local_segments(points, chains, params, adapt_length=True, line_fit=True,
-                              min_support_px=params.chain_min_support_px)
+                              min_support_px=params.piece_min_support_px)
     # the chain's fit orients a piece better than its 13 cuts near a corner: refinement may turn it 1 deg
     segments = _on_lines(refine_on_gradient(segments, grad.magnitude, max_turn_deg=1.0), points, chains,
                          line_of_chain)

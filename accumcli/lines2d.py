@@ -69,7 +69,8 @@ class LineParams:
     max_gap_px: float = 3.0           # a longer gap along a line ends a run of support
     end_extension_px: float = 2.5     # pieces reach this far beyond a run's first and last pixel
     junction_radius_px: float = 7.0   # runs ending this near another line's run meet it at the corner
-    chain_min_support_px: float = 10.0  # chains: a run of support needs this span of edge pixels
+    chain_min_support_px: float = 10.0  # chains: a straight chain needs this span of edge pixels ...
+    piece_min_support_px: float = 8.0   # ... and a piece on it (a run of its support) this span
     detector: str = "chains"
 
 
