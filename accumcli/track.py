@@ -71,12 +71,12 @@ On dev_steps_track, where objects turn up to 8 degrees a frame, the refinement s
 restarts took its tracked share from 0.950 to 1.000, and the tracking scoreboard kept no false
 frame and the wrong model lost everywhere. The restarts also run in the frame after an 'ambiguous'
 one, whose poses are all undetermined, and ``decide`` treats that frame as a search (``unresolved``):
-with the models of an extraction not kept (pieces from 8 px), dev_steps_track's frame after an
+with the models of the pieces from 8 px (``edge_chains``), dev_steps_track's frame after an
 ambiguous one verified the wrong minimum 3.5 deg off at 0.58 px, refined from the prediction, while
 the refinement carried from the right pose slid off; the restarts found the truth at 0.37 px (then
 'ambiguous': the wrong one still covers within the margin); on sim_206 a carried pose verified 3.8
-and then 6.7 deg off, where a near-miss rival now makes it 'ambiguous'. With today's models the
-tracking scoreboard is the same to the digit. Whenever none of these is verified, and
+and then 6.7 deg off, where a near-miss rival now makes it 'ambiguous'. With the models of pieces
+from 10 px the tracking scoreboard was the same to the digit. Whenever none of these is verified, and
 always when there is no tracked frame yet or the last one is more than
 ``max_gap_s`` ago (snapshots, not video: no prediction holds), it re-acquires by
 RANSAC over 3D-3D segment correspondences (``ransac_pose``). The angle and the distance
