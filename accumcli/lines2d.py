@@ -45,6 +45,7 @@ import cv2
 import numpy as np
 
 from .errors import InputError
+from .grouping import group_range
 from .chain_kernel import line_order
 from .group_kernel import group_moments, line_coordinates, magnitude as magnitude_image
 from .profile_kernel import cut_grid, cut_peaks
@@ -110,6 +111,13 @@ class Segments2D:
         """(N, 2, 2) endpoints, px."""
         half = (self.lengths / 2)[:, None] * self.directions
         return np.stack([self.centers - half, self.centers + half], axis=1)
+
+    def line_extents(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lines,) and (lines,) px: where each line's local segments begin and end along it (``t`` of
+        their first and last end; inf and -inf for a line without segments)."""
+        n = int(self.line_id.max()) + 1 if len(self) else 0
+        return (group_range(self.line_id, n, self.t - self.lengths / 2)[0],
+                group_range(self.line_id, n, self.t + self.lengths / 2)[1])
 
 
 @dataclass(eq=False)

@@ -50,7 +50,6 @@ from scipy.spatial import cKDTree
 
 from .extract import FrameSegments
 from .geometry import invert, transform_points
-from .grouping import group_range
 from .recording import StereoIntrinsics
 from .stereo import backproject
 
@@ -109,9 +108,7 @@ def junction_samples(extraction: FrameSegments, intrinsics: StereoIntrinsics) ->
     # both lines end there (an L-junction): an edge that runs on through it (T-junction, crossing) does not
     left = extraction.left
     line_id = left.line_id[extraction.left_index[index]]
-    n_lines = int(left.line_id.max()) + 1
-    lo = group_range(left.line_id, n_lines, left.t - left.lengths / 2)[0]          # each line's extent, px
-    hi = group_range(left.line_id, n_lines, left.t + left.lengths / 2)[1]
+    lo, hi = left.line_extents()          # each line's extent, px
     t_piece = left.t[extraction.left_index[index]]
     near = np.ones(len(a), bool)
     for k, t_k in ((a, t_a), (b, t_b)):

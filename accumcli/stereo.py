@@ -72,11 +72,15 @@ before held errors of median 5.1, 90th percentile 27.6 degrees; with 1 degree ov
 bins' median errors are 3.7 (sigma 4-6), 4.2 (6-10), 7.5 (10-20), 12.7 (20-90): about 0.67 sigma
 or less, a Gaussian's, and ordered. ``make suite``: precision median 0.949 -> 0.944, completeness
 median 0.598 and worst 0.263 unchanged (rows within the run-to-run noise of docs/suite.md).
-A plane's error is ``plane_sigma_deg``, or more on a short line: a least-squares line through
-edge pixels scattered by ``line_fit_sigma_px`` over a span of n px turns by that times sqrt(12) / n
-rad, 3 degrees on a line of 10 px; the plane of the shorter of the two lines counts. It came with
-the pieces from 8 px (``edge_chains``), whose precision it keeps: rows under 0.95 on ``make
-suite`` 4 -> 3, the real teabox's surface precision 0.572 -> 0.595.
+A plane's error is ``plane_sigma_deg``, or more on a short line: ``line_fit_sigma_px`` times
+sqrt(12) / n rad over the span n (px) that the line's local segments reach (their ends included),
+3 degrees at 10 px; the plane of the shorter of the two lines counts. An empirical figure, sqrt(n)
+times the least-squares slope error of n independent edge pixels scattered by that much: the pixels
+along an edge are not independent (the blur ties neighbours, and the ends bend into junctions), and
+the independent figure stays under the 1-degree floor on every line of 10 px or more, i.e. changes
+nothing. It came with the pieces from 8 px (``edge_chains``), whose precision it keeps: on ``make
+suite``, rows under 0.95 (the teabox included) 5 -> 4, the real teabox's surface precision 0.572 ->
+0.595. (``line_model``'s view planes take the independent figure, with the same 0.15 px.)
 """
 
 from __future__ import annotations
@@ -109,9 +113,9 @@ class StereoParams:
     propagate_score: float = 0.0
     fit_outlier_px: float = 1.0
     default_disparity_sigma_px: float = 0.25
-    plane_sigma_deg: float = 1.0         # a back-projected plane's angular error: a segment alone ...
-    max_alone_sigma_deg: float = 60.0    # ... on its stretch has plane_sigma_deg / sin(planes' angle), at most this
-    line_fit_sigma_px: float = 0.15      # and at least a line fit's: this edge scatter over its span (``triangulate``)
+    plane_sigma_deg: float = 1.0         # a back-projected plane's angular error (at least, on a short line, ...
+    line_fit_sigma_px: float = 0.15      # ... this times sqrt(12) / its span in px, rad): a segment alone ...
+    max_alone_sigma_deg: float = 60.0    # ... on its stretch has that error / sin(planes' angle), at most this
     # critical segments from their runs' ends (``critical``)
     critical_by_ends: bool = True
     end_window_px: int = 5               # half width of the block-matching window at a run end
@@ -313,15 +317,6 @@ def _patch_score(ncc, mean_a, mean_b, energy_a, energy_b, n: int, params: Stereo
     return ncc - ((mean_a - mean_b) / params.brightness_tolerance) ** 2 - (contrast / params.contrast_tolerance) ** 2
 
 
-def _line_span(segments: Segments2D) -> np.ndarray:
-    """(lines,) px: how far each line's local segments reach along it, first end to last."""
-    n = int(segments.line_id.max()) + 1 if len(segments) else 0
-    low, high = np.full(n, np.inf), np.full(n, -np.inf)
-    np.minimum.at(low, segments.line_id, segments.t - segments.lengths / 2)
-    np.maximum.at(high, segments.line_id, segments.t + segments.lengths / 2)
-    return high - low
-
-
 def backproject(u: np.ndarray, v: np.ndarray, d: np.ndarray, intr: StereoIntrinsics) -> np.ndarray:
     """(N, 3) points in the left camera frame, metres, from pixel (u, v) and disparity d."""
     z = intr.fx * intr.baseline / d
@@ -383,9 +378,12 @@ def triangulate(left: Segments2D, right: Segments2D, m: Matches, intr: StereoInt
     # direction: the fitted slope's uncertainty tilts the segment along the viewing ray
     sigma_slope = np.maximum(sigma[stretch], 0.05) / np.sqrt(np.maximum(count[stretch] * spread[stretch] ** 2 / 12,
                                                                         1e-9))
-    # a plane is as sure as the shorter of its two lines: a fit over n = span px of edge pixels scattered by
-    # line_fit_sigma_px turns by sigma sqrt(12) / span rad (the slope of a least-squares line)
-    span = np.minimum(_line_span(left)[left.line_id[m.left]], _line_span(right)[right.line_id[m.right]])
+    # a plane is as sure as the shorter of its two lines (module docstring: an empirical figure)
+    def line_span(side: Segments2D, index: np.ndarray) -> np.ndarray:
+        low, high = side.line_extents()
+        return (high - low)[side.line_id[index]]
+
+    span = np.minimum(line_span(left, m.left), line_span(right, m.right))
     plane_sigma = np.maximum(params.plane_sigma_deg,
                              np.degrees(params.line_fit_sigma_px * np.sqrt(12) / np.maximum(span, 1.0)))
     sigma_direction = np.where(fitted, np.arctan2(depth_per_disparity * sigma_slope * 2 * np.abs(along),

@@ -69,8 +69,9 @@ and no frame is falsely tracked.
 On dev_steps_track, where objects turn up to 8 degrees a frame, the refinement stopped in a minimum
 5.9 degrees from the truth in frames 29 to 31, from which the truth's own refinement stays put; the
 restarts took its tracked share from 0.950 to 1.000, and the tracking scoreboard kept no false
-frame and the wrong model lost everywhere. The restarts also run in the frame after an 'ambiguous'
-one, whose poses are all undetermined, and ``decide`` treats that frame as a search (``unresolved``):
+frame and the wrong model lost everywhere. The restarts also run in the frames after an 'ambiguous'
+one until one is tracked (its poses are all undetermined), and ``decide`` treats those frames as a
+search (``unresolved``):
 with the models of the pieces from 8 px (``edge_chains``), dev_steps_track's frame after an
 ambiguous one verified the wrong minimum 3.5 deg off at 0.58 px, refined from the prediction, while
 the refinement carried from the right pose slid off; the restarts found the truth at 0.37 px (then
@@ -158,7 +159,8 @@ class TrackParams:
     max_rms_cap_px: float = 0.8              # at most this;
     inlier_slack: float = 0.05               # its inlier share less this,
     min_inlier_fraction_floor: float = 0.8   # at least this
-    restart_deg: float | None = 5.0          # a frame nothing verified in restarts from its best pose turned by this
+    restart_deg: float | None = 5.0          # a frame nothing verified in (or after an ambiguous one) restarts
+                                             # from its best pose turned by this
     suspect_rms_ratio: float | None = 1.5    # ... and so does one verified at this many times the recent RMS
     suspect_limit_share: float = 0.75        # and above this share of max_rms_px (little margin under the limit)
     recent_frames: int = 5                   # (the median RMS of the last this many tracked frames, at least one)
@@ -857,8 +859,9 @@ def decide(candidates: list[PoseEstimate], params: TrackParams = TrackParams(),
     candidates, and those that the images show about as well (they pass the image checks of
     ``judge`` with ``rival_slack`` on the RMS, and half of it on the inlier share, whatever their
     standard deviations) and that neither the motion nor 3D support ``refuted``: every such one
-    where the best was found searching after nothing verified ('wide', 'restart') or the frame before
-    was 'ambiguous' (``unresolved``: no pose of it was determined, so none continues it), and such
+    where the best was found searching after nothing verified ('wide', 'restart') or no frame was
+    tracked since an 'ambiguous' one (``unresolved``: no pose of it was determined, so none continues
+    it), and such
     symmetric twins ('symmetry') and refinements from the last ambiguous frame's poses ('carried')
     always. Found with the models of experiments not kept: a
     re-acquisition slid 10.3 mm along a model's parallel edges verified at coverage 0.895 while its

@@ -224,27 +224,25 @@ def test_a_short_line_alone_is_as_unsure_as_its_fit():
     by ``line_fit_sigma_px`` turns by that times sqrt(12) / n rad. The 14 mm square at 0.5 m (sides
     of about 17 px, one piece each) claims for its sides across the rows 0.15 sqrt(12) / 17 rad =
     1.75 degrees of plane error instead of the 1 degree of a long line: their sigma grows by that
-    ratio (within the sides' spans, 15 to 20 px), and the errors stay within two sigmas."""
+    ratio (within the sides' spans, 15 to 20 px). Whether such sigmas are honest is measured on
+    the suite's frames (``make uncertainty``), not here."""
     from dataclasses import replace
 
     square, corners = rotated_square([0.0, 0.0], 0.007, 15.0, 0.5)
     frame = render_pair([square], seed=3)
-    sigmas, errors = [], []
+    sigmas = []
     for fit_px in (0.0, 0.15):
         params = ExtractParams(stereo=replace(ExtractParams().stereo, line_fit_sigma_px=fit_px))
         seg = extract_frame(frame, params).segments
-        sigma, error = [], []
+        sigma = []
         for i in (1, 3):   # the sides across the rows
             side = (corners[(i + 1) % 4] - corners[i]) / np.linalg.norm(corners[(i + 1) % 4] - corners[i])
             on = np.linalg.norm(np.cross(seg.centers - corners[i], side), axis=1) < 0.002
             on &= np.abs(seg.directions @ side) > np.cos(np.radians(30))   # not the next side's piece
             assert on.sum() >= 1
             sigma.append(np.degrees(seg.extra["sigma_direction_rad"][on]))
-            error.append(np.degrees(np.arccos(np.clip(np.abs(seg.directions[on] @ side), 0, 1))))
         sigmas.append(np.concatenate(sigma))
-        errors.append(np.concatenate(error))
     ratio = sigmas[1] / sigmas[0]
-    print(f"sigma {sigmas[0].round(2)} -> {sigmas[1].round(2)} deg (x {ratio.round(2)}), errors {errors[1].round(2)}")
+    print(f"sigma {sigmas[0].round(2)} -> {sigmas[1].round(2)} deg (x {ratio.round(2)})")
     expected_low, expected_high = np.degrees(0.15 * np.sqrt(12) / np.array([20.0, 15.0]))
     assert np.all((ratio >= expected_low) & (ratio <= expected_high))
-    assert np.all(errors[1] <= 2 * sigmas[1])
