@@ -31,8 +31,7 @@ from .cli_options import (
     workers_option,
 )
 from .errors import AccumError, InputError
-from .outputs import (caused_by_interrupt, descriptor_of, interrupt_received, names_open_file,
-                      raise_pending_interrupt)
+from .outputs import caused_by_interrupt, interrupt_received, names_open_file, raise_pending_interrupt
 
 log = logging.getLogger("accumcli")
 

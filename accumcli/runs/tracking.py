@@ -91,9 +91,10 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
         model_path, model = "the model", checked_segments(model, "the model")
     if not model.accepted.any():
         raise AccumError(f"{model_path}: the model has no accepted segment (confidence >= 0.5) to track")
-    if object_frame_of_model and model.frame_id and frame_name(model.frame_id) != options.object_frame:
+    model_frame = frame_name(model.frame_id)   # as the recording's tree keys it
+    if object_frame_of_model and model_frame and model_frame != options.object_frame:
         log.info("the object's frame is the model's: %s (--object-frame tracks it in another)", model.frame_id)
-        options = replace(options, object_frame=frame_name(model.frame_id))
+        options = replace(options, object_frame=model_frame)
     if init_pose is not None:
         init_pose = check_transform(init_pose, "init_pose")
     files = OutputSet([*outputs, rrd], inputs=[recording, model_file])
@@ -103,7 +104,7 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
     with options.open(recording, require_pose=init_pose is None) as rec, files:
         total = frames.check(rec)
         _check_child_frame(poses_child_frame, rec, [p for p in outputs if str(p).lower().endswith(".mcap")])
-        if model.frame_id and frame_name(model.frame_id) != rec.object_frame:   # --object-frame given: the user's
+        if model_frame and model_frame != rec.object_frame:   # --object-frame given: the user's
             log.warning("%s: the model is in frame %r, tracked as the recording's %r (--object-frame): the same "
                         "object under another name, or a wrong model (then nothing is tracked)", model_path,
                         model.frame_id, rec.object_frame)
@@ -174,10 +175,11 @@ def _check_child_frame(child: str | None, rec, mcap_outputs) -> None:
     beside its recorded one (a warning: Foxglove shows one of them)."""
     if child is None or not mcap_outputs:
         return
-    if frame_name(child) == rec.camera_frame:
+    named = frame_name(child)   # as the tree keys it
+    if named == rec.camera_frame:
         raise InputError(f"--poses-child-frame {child}: that is the poses' parent frame (the camera's), and a "
                          f"frame cannot be its own parent; give another name (default {rec.object_frame}_tracked)")
-    if frame_name(child) in rec.tree.frames:
+    if named in rec.tree.frames:
         log.warning("--poses-child-frame %s: the recording's transform tree has that frame already; the tracked "
                     "poses give it a second parent, and Foxglove shows one of the two (default %s_tracked)",
                     child, rec.object_frame)

@@ -221,7 +221,6 @@ def _check_fit(models: dict, frame, T_camera_object: np.ndarray, gradients=None)
                         "a model of another object, or of another object frame? (A model of other aspects of this "
                         "object can also miss a frame.)", name, frame.index, estimate.status,
                         estimate.reason or f"coverage {estimate.coverage:.2f}")
-    return True
 
 
 def middle_frame(frames, count: int) -> int:
