@@ -19,8 +19,8 @@ from accumcli.pipeline import AccumulateParams, LineAccumulation
 from accumcli.recording import Recording
 from accumcli.segments import Segments, concatenate
 from accumcli.extract import extract_frame
-from accumcli.track import (PoseTracker, TrackParams, _gradients, _refine_from, expected_weights, ransac_pose, refine_pose,
-                            start_estimate)
+from accumcli.track import (PoseEstimate, PoseTracker, TrackParams, _gradients, _refine_from, expected_weights, judge,
+                            ransac_pose, refine_pose, start_estimate)
 
 
 @pytest.fixture(scope="module")
@@ -125,6 +125,55 @@ def test_segments_seen_only_from_elsewhere_neither_pull_the_pose_nor_lower_its_c
     assert weighted.status == "tracked" and pose_error(weighted.T_camera_object, T_true)[0] < 0.3
     assert abs(weighted.coverage - alone.coverage) < 0.02
     assert unweighted.coverage < alone.coverage - 0.2        # without the weights the decoys count as misses
+
+
+def _hidden_everywhere(model: Segments, shift: np.ndarray) -> Segments:
+    """``model``'s segments moved by ``shift`` (m, object frame) where the images show nothing of them,
+    with cones of views that take in every direction: as an edge the object hides from the aspects
+    tracked, whose cones (the aspects it was built from) do not say so."""
+    extra = {"view_direction": model.extra["view_direction"], "view_spread_deg": np.full(len(model), 180.0)}
+    return Segments(model.frame_id, model.centers + shift, model.directions, model.lengths, model.confidence,
+                    model.observations, extra)
+
+
+def test_segments_the_tracked_frames_do_not_find_count_less_in_the_coverage(noisy_pair, model_of_exact):
+    """A third more segments that the images never show, 10 cm beside the object: the coverage counts
+    them as misses; the coverage that ``min_coverage`` judges (``coverage_found``) counts them less and
+    less as the tracker learns that they are not found (``found_memory``). A given pose (a start)
+    forgets it, and without the memory there is none."""
+    exact, _ = noisy_pair
+    real = model_of_exact.select(model_of_exact.accepted)
+    hidden = _hidden_everywhere(real.select(np.arange(0, len(real), 3)), np.array([0.1, 0.0, 0.0]))
+    model = concatenate([real, hidden], real.frame_id)
+    with Recording(exact) as rec:
+        frames = list(rec.frames(0, 8))
+    runs = {}
+    for memory in (0.3, None):
+        tracker = PoseTracker(model, TrackParams(found_memory=memory))
+        runs[memory] = [tracker.update(f, f.T_camera_object if f.index == 0 else None) for f in frames]
+        restart = tracker.update(frames[-1], frames[-1].T_camera_object)
+    alone = PoseTracker(real)
+    clean = [alone.update(f, f.T_camera_object if f.index == 0 else None) for f in frames]
+    learnt, forgetting = runs[0.3], runs[None]
+    assert all(e.status == "tracked" for e in learnt + forgetting)
+    assert np.isnan(learnt[0].coverage_found) and np.isnan(restart.coverage_found)   # nothing known yet / forgotten
+    assert all(np.isnan(e.coverage_found) for e in forgetting)
+    for a, b in zip(learnt, forgetting):           # the coverage of all expected segments is not weighed
+        assert abs(a.coverage - b.coverage) < 0.02
+    last = learnt[-1]
+    assert last.coverage < clean[-1].coverage - 0.1                     # the hidden ones are misses
+    # ... and count for little in coverage_found: most of what they took is back (about 0.9 at the rate's floor)
+    assert last.coverage_found - last.coverage > 0.7 * (clean[-1].coverage - last.coverage)
+
+
+def test_min_coverage_judges_the_coverage_weighed_by_what_was_found():
+    estimate = PoseEstimate(np.eye(4), 0.3, 100, 100, "lost", coverage=0.40, coverage_found=0.50,
+                            std_rotation_deg=np.full(3, 0.1), std_translation_mm=np.full(3, 0.1))
+    assert judge(estimate, TrackParams()).status == "tracked"
+    estimate.coverage, estimate.coverage_found = 0.50, 0.40
+    assert judge(estimate, TrackParams()).reason.startswith("coverage 0.40 in both images weighed by what recent")
+    estimate.coverage_found = float("nan")        # no found rates: the coverage itself
+    assert judge(estimate, TrackParams()).status == "tracked"
 
 
 def test_a_second_start_that_reaches_a_refined_pose_joins_it_and_a_far_one_does_not(noisy_pair, model_of_exact):
