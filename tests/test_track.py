@@ -19,8 +19,8 @@ from accumcli.pipeline import AccumulateParams, LineAccumulation
 from accumcli.recording import Recording
 from accumcli.segments import Segments, concatenate
 from accumcli.extract import extract_frame
-from accumcli.track import (PoseEstimate, PoseTracker, TrackParams, _gradients, _refine_from, expected_weights, judge,
-                            ransac_pose, refine_pose, start_estimate)
+from accumcli.track import (PoseEstimate, PoseTracker, TrackParams, _gradients, _pairs, _refine_from, expected_weights,
+                            judge, ransac_pose, refine_pose, start_estimate)
 
 
 @pytest.fixture(scope="module")
@@ -230,6 +230,36 @@ def test_ransac_recovers_a_pose_from_3d_segments():
     assert result.support >= 0.8 * keep.sum() and rotation < 1.0 and translation < 0.003
     assert result.reason == "" and result.hypotheses[0][1] == result.support
 
+
+
+def test_ransac_draws_its_pairs_from_segments_sure_of_their_direction():
+    """Pairs of unsure pieces (the frame's short ones) match wrong model pairs: ``_pairs`` draws from
+    the segments whose direction sigma is within ``sure_deg`` when at least 8 are, else from all."""
+    rng = np.random.default_rng(5)
+    n = 40
+    d = rng.normal(size=(n, 3))
+    sigma = np.radians(np.where(np.arange(n) < 10, 1.0, 20.0))     # ten sure, thirty unsure
+    segments = Segments("o", rng.uniform(-0.06, 0.06, (n, 3)), d / np.linalg.norm(d, axis=1, keepdims=True),
+                        np.full(n, 0.012), np.ones(n), np.ones(n, np.int64), {"sigma_direction_rad": sigma})
+    i, j = _pairs(segments, 200, np.random.default_rng(0), 0.3, sure_deg=4.0)
+    assert len(i) > 20 and np.all(i < 10) and np.all(j < 10)
+    i, j = _pairs(segments, 200, np.random.default_rng(0), 0.3, sure_deg=None)
+    assert np.any(i >= 10) and np.any(j >= 10)
+    few = segments.select(np.arange(5, n))                          # five sure: too few to draw from
+    i, j = _pairs(few, 200, np.random.default_rng(0), 0.3, sure_deg=4.0)
+    assert np.any(i >= 5) and np.any(j >= 5)
+
+
+def test_a_frame_covering_much_less_than_the_recent_ones_restarts(noisy_pair, model_of_exact):
+    """``_coverage_fell``: a verified best 0.15 or more under the recent frames' median coverage."""
+    tracker = PoseTracker(model_of_exact)
+    assert not tracker._coverage_fell([_estimate(np.eye(4), 0.50)])       # no tracked frame yet
+    tracker._recent_coverage.extend([0.70, 0.72, 0.74])
+    assert tracker._coverage_fell([_estimate(np.eye(4), 0.55)])
+    assert not tracker._coverage_fell([_estimate(np.eye(4), 0.60)])
+    assert not tracker._coverage_fell([_estimate(np.eye(4), 0.40, "lost")])   # a lost frame restarts anyway
+    tracker.params = replace(tracker.params, suspect_coverage_drop=None)
+    assert not tracker._coverage_fell([_estimate(np.eye(4), 0.30)])
 
 def test_track_command_writes_poses_json_and_mcap(noisy_pair, tmp_path):
     from mcap.reader import make_reader
