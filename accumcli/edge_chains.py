@@ -27,19 +27,32 @@ a line's votes to pile up in a +-3 deg window: short and crowded edges are lost.
 Choices where the task is vague: chains are linked by gradient agreement between neighbours,
 not traced pixel by pixel (the links are found vectorised; their components and cuts in a small
 compiled kernel, ``chain_kernel``);
-straight chains under 10 px are dropped, and runs of support under 8 px on the longer ones (a
-piece reaches ``end_extension_px`` beyond its run). Measured on ``make suite`` (medians, worst row
-in brackets), against 10 px for both: completeness 0.576 (0.257) -> 0.609 (0.269), edge length
-right in two single frames 0.661 -> 0.735, precision 0.980 -> 0.971 (rows under 0.95, the teabox
-included: 3 -> 4, sim_106 at 0.947), single-frame near-object precision 0.790 -> 0.766; the
-real teabox's surface precision / completeness 0.609 / 0.646 -> 0.595 / 0.663; with the plane sigma
-of short lines (``stereo.triangulate``), without which precision rows under 0.95 were 5 and the
-teabox 0.572 / 0.660. Tracking with these models (``benchmarks/track_suite.py``): no false frame,
-tracked median 0.950 -> 0.933 (dev_steps 60 -> 57 of 60, two of them 'ambiguous'; the teabox 38 ->
-37 of 40); the accumulation's pairs per second median 27.7 -> 28.0, worst 12.1 -> 7.9 (sim_108,
-whose cloudy background gives three times the pieces). Pieces from 6 px: completeness 0.629
-(0.266) but precision 0.962 with seven rows under 0.95; chains cut at 6 px too: 0.625 and the teabox
-0.558 / 0.516 (the chains' cut, not the pieces', loses on the real recording).
+straight chains under 10 px are not cut at a bend (``chain_min_support_px``), and runs of support
+under 8 px give no piece (a piece reaches ``end_extension_px`` beyond its run). Measured on ``make
+suite`` (medians, worst row in brackets), against 10 px for both: completeness 0.576 (0.257) -> 0.609
+(0.269), edge length right in two single frames 0.661 -> 0.735, precision 0.980 -> 0.971 (rows under
+0.95, the teabox included: 3 -> 4, sim_106 at 0.947), single-frame near-object precision 0.790 ->
+0.766; the real teabox's surface precision / completeness 0.609 / 0.646 -> 0.595 / 0.663; with the
+plane sigma of short lines (``stereo.triangulate``), without which precision rows under 0.95 were 5
+and the teabox 0.572 / 0.660. Tracking with these models (``benchmarks/track_suite.py``): no false
+frame, tracked median 0.950 -> 0.933 (dev_steps 60 -> 57 of 60, two of them 'ambiguous'; the teabox
+38 -> 37 of 40); the accumulation's pairs per second median 27.7 -> 28.0, worst 12.1 -> 7.9
+(sim_108, whose cloudy background gives three times the pieces). Pieces from 6 px: completeness
+0.629 (0.266) but precision 0.962 with seven rows under 0.95; chains cut at 6 px too: 0.625 and the
+teabox 0.558 / 0.516 (the chains' cut, not the pieces', loses on the real recording).
+
+A run whose two ends both meet other lines at corners (``_complete_junctions`` grows both) gives a
+piece from 7 px (``corner_piece_min_support_px``): Canny loses a pixel or two at each corner, so a
+whole edge of 9 to 10 px between two corners spans 7, where a free run of 7 px is as likely texture
+or noise. On ``make suite`` against 8 px for both: completeness median 0.609 -> 0.624 (worst 0.269 ->
+0.271), higher on 15 rows and lower on one (sim_102 0.813 -> 0.806); 2D detected median 0.773 ->
+0.793; precision median 0.971 both, rows under 0.95 besides the teabox 3 -> 2 (sim_106 0.947 ->
+0.956; sim_111 0.975 -> 0.952 and dev_wedge_far 0.966 -> 0.953 lower); the teabox 0.595 / 0.663 ->
+0.609 / 0.665; single-frame near-object precision median 0.766 -> 0.753; the accumulation's pairs
+per second median 28.0 -> 24.6 (more pieces). From 6 px between corners: completeness 0.625, four
+rows under 0.95 (sim_109 0.948, dev_wedge_far 0.938); from 5 px: 0.628, seven rows, precision median
+0.964. With the chains also cut from 5 px the teabox fell to 0.519 (its long critical edge, which
+``critical`` triangulates through its ends, lost both frames that gave it).
 """
 
 from __future__ import annotations
@@ -136,7 +149,8 @@ def detect_chains(image: np.ndarray, params: LineParams, grad: Gradients | None 
     line_of_chain = collinear_lines(points, chains, 2 * params.junction_radius_px)
     t0 = times.add("lines", t0)  # the line-finding stage (whatever the detector), for comparable breakdowns
     segments = local_segments(points, chains, params, adapt_length=True, line_fit=True,
-                              min_support_px=params.piece_min_support_px)
+                              min_support_px=params.piece_min_support_px,
+                              corner_min_support_px=params.corner_piece_min_support_px)
     # the chain's fit orients a piece better than its 13 cuts near a corner: refinement may turn it 1 deg
     segments = _on_lines(refine_on_gradient(segments, grad.magnitude, max_turn_deg=1.0), points, chains,
                          line_of_chain)

@@ -71,7 +71,8 @@ class LineParams:
     end_extension_px: float = 2.5     # pieces reach this far beyond a run's first and last pixel
     junction_radius_px: float = 7.0   # runs ending this near another line's run meet it at the corner
     chain_min_support_px: float = 10.0  # chains: a straight chain needs this span of edge pixels ...
-    piece_min_support_px: float = 8.0   # ... and a piece on it (a run of its support) this span
+    piece_min_support_px: float = 8.0   # ... and a piece on it (a run of its support) this span,
+    corner_piece_min_support_px: float = 7.0   # or this one between two corners (both ends meet other lines)
     detector: str = "chains"
 
 
@@ -397,7 +398,7 @@ def _canonical(directions: np.ndarray) -> np.ndarray:
 
 def local_segments(points: EdgePoints, labels: np.ndarray, params: LineParams,
                    adapt_length: bool = False, line_fit: bool = False,
-                   min_support_px: float = 0.0) -> Segments2D:
+                   min_support_px: float = 0.0, corner_min_support_px: float | None = None) -> Segments2D:
     """Cut every labelled line into local segments (see the module docstring).
 
     Along a line, consecutive supporting pixels (gaps up to ``max_gap_px``,
@@ -411,6 +412,8 @@ def local_segments(points: EdgePoints, labels: np.ndarray, params: LineParams,
     piece is L long). ``line_fit``: a piece lies on its line's fit (direction the line's, centre
     the line's point at the piece's mean position along it) instead of its own pixels' fit; for
     labels that are straight by construction, whose whole fit is steadier than a few pixels'.
+    ``corner_min_support_px``: a run whose two ends both meet other lines at corners
+    (``_complete_junctions`` grows both) needs only this span of pixels, not ``min_support_px``.
     """
     on_line = np.flatnonzero(labels >= 0)
     if len(on_line) == 0:
@@ -437,8 +440,13 @@ def local_segments(points: EdgePoints, labels: np.ndarray, params: LineParams,
     fill = count_run / ((t_hi - t_lo + 1.0) * np.max(np.abs(line_dir[run_line]), axis=1))
     support = t_hi - t_lo + 1.0
     # a run without the fill or the support gives no piece whatever it grows: its growth is not needed
-    needed = (fill >= params.min_fill) & (support >= min_support_px)
-    t_lo, t_hi = _complete_junctions(t_lo, t_hi, line_center[run_line], line_dir[run_line], run_line, needed, params)
+    least = min_support_px if corner_min_support_px is None else min(min_support_px, corner_min_support_px)
+    needed = (fill >= params.min_fill) & (support >= least)
+    grown_lo, grown_hi = _complete_junctions(t_lo, t_hi, line_center[run_line], line_dir[run_line], run_line, needed,
+                                             params)
+    if least < min_support_px:    # the shorter runs count only between two corners
+        needed &= (support >= min_support_px) | ((grown_lo < t_lo) & (grown_hi > t_hi))
+    t_lo, t_hi = grown_lo, grown_hi
     run_length = t_hi - t_lo + 1.0
     # Canny and the vote lose a pixel or two where edges meet: let the pieces reach past the run's ends
     t_lo, run_length = t_lo - params.end_extension_px, run_length + 2 * params.end_extension_px

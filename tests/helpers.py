@@ -30,8 +30,10 @@ def pose(i: int) -> np.ndarray:
 
 
 def write(path, n=5, *, skip_topics=(), corrupt_left=(), unpaired_right=(), tf_quats=None, tf_times=None,
-          encoding="png") -> str:
-    """A small recording; the options break it in the named ways."""
+          encoding="png", images=None) -> str:
+    """A small recording; the options break it in the named ways. ``images``: the image of index i
+    (the right image of frame i is image i + 100; default ``image``, noise)."""
+    image = images or globals()["image"]
     with RecordingWriter(path) as w:
         for side in ("left", "right"):
             if f"/stereo/{side}/calibration" not in skip_topics:

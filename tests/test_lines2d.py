@@ -199,11 +199,23 @@ def _recall_by_edge_length(params, low, high):
 
 def test_pieces_shorter_than_their_chain_minimum_are_kept():
     """An edge of 11 to 15 px is a straight chain of at least 10 px whose pieces span 8 px or more:
-    found by default (>= 85 % of its length), where pieces of 10 px lose the edges of 11 to 12.5 px
-    (half or less). Under 10 px no chain is long enough either way (the edges of 8 and 9.6 px)."""
+    found by default (>= 85 % of its length), where pieces of 10 px (between corners too) lose the
+    edges of 11 to 12.5 px (half or less)."""
     assert _recall_by_edge_length(LineParams(), 10.5, 15.0) >= 0.85
-    assert _recall_by_edge_length(LineParams(piece_min_support_px=10.0), 10.5, 12.5) <= 0.5
-    assert _recall_by_edge_length(LineParams(), 0.0, 9.8) == 0.0
+    assert _recall_by_edge_length(LineParams(piece_min_support_px=10.0, corner_piece_min_support_px=10.0),
+                                  10.5, 12.5) <= 0.5
+
+
+def test_an_edge_between_two_corners_needs_less_support():
+    """The rectangles' edges of 8 to 10 px end at corners on both sides, where Canny loses a pixel
+    or two: their runs span 7 px, which gives a piece between two corners
+    (``corner_piece_min_support_px``), covering half of those edges here, where runs must span the
+    8 px of a free end (``piece_min_support_px``) and none is found. The edges of 10 px are found
+    whole by default, half with 8 px between corners too."""
+    assert _recall_by_edge_length(LineParams(), 0.0, 9.8) >= 0.4
+    assert _recall_by_edge_length(LineParams(corner_piece_min_support_px=8.0), 0.0, 9.8) == 0.0
+    assert _recall_by_edge_length(LineParams(), 9.8, 10.5) >= 0.9
+    assert _recall_by_edge_length(LineParams(corner_piece_min_support_px=8.0), 9.8, 10.5) <= 0.6
 
 
 @pytest.mark.parametrize("name", ["chains", "hough"])
