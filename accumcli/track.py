@@ -1191,7 +1191,9 @@ class PoseTracker:
         Measured on dev_cube_small tracked with its own model (corner pieces): frames 12 to 15
         verified 14.6 to 30.9 deg off after frame 11 at 2.7, the first at a coverage of 0.55 against
         a recent 0.72; with the restarts they are 'ambiguous' or 'lost' (false frames 5 -> 1, tracked
-        0.583 -> 0.417). 0.1 caught the same frames and lost more right ones (0.333 tracked)."""
+        0.583 -> 0.417). 0.1 caught the same frames and lost more right ones (0.333 tracked). The
+        restarts cost the tracking bench (``make bench``) 15 % of its time (53 -> 45 frames/s): an
+        object turning to a poorer aspect runs them too."""
         p = self.params
         best = max(candidates, key=_rank, default=None)
         return bool(p.suspect_coverage_drop is not None and self._recent_coverage and best is not None
