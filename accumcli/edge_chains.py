@@ -14,11 +14,12 @@ a line's votes to pile up in a +-3 deg window: short and crowded edges are lost.
    ``CHAIN_MAX_RESIDUAL_PX`` from the chord between its ends is cut there (at its corner, whose
    own pixels are dropped), repeatedly (``CHAIN_SPLITS`` rounds, only the chains cut are looked
    at again; ``straight_chains``).
-4. Local pieces (``lines2d.local_segments``): on each straight chain spanning ``chain_min_support_px``
-   of pixels, runs of support spanning ``piece_min_support_px`` are tiled by ``ceil(R / L)`` equal pieces (L =
-   ``segment_length_px``; a run shorter than L is one piece of its own length), each on the
-   chain's own line fit (orientation from the whole chain, position at the piece's pixels), ends
-   extended to meeting lines' corners (``junction_radius_px``), refined on the gradient.
+4. Local pieces (``lines2d.local_segments``): on each straight chain, runs of support spanning
+   ``piece_min_support_px`` (``corner_piece_min_support_px`` between two corners) are tiled by
+   ``ceil(R / L)`` equal pieces (L = ``segment_length_px``; a run shorter than L is one piece of its
+   own length), each on the chain's own line fit (orientation from the whole chain, position at the
+   piece's pixels), ends extended to meeting lines' corners (``junction_radius_px``), refined on the
+   gradient.
 5. Lines: straight chains whose ends lie within ``2 * junction_radius_px`` of each other,
    within ``COLLINEAR_DEG`` in direction and ``COLLINEAR_PX`` across are one line (transitively),
    as a Hough line is: ``line_id``, ``t`` and ``line_direction`` are that line's, so stereo
@@ -41,7 +42,7 @@ frame, tracked median 0.950 -> 0.933 (dev_steps 60 -> 57 of 60, two of them 'amb
 0.629 (0.266) but precision 0.962 with seven rows under 0.95; chains cut at 6 px too: 0.625 and the
 teabox 0.558 / 0.516 (the chains' cut, not the pieces', loses on the real recording).
 
-A run whose two ends both meet other lines at corners (``_complete_junctions`` grows both) gives a
+A run grown to a corner at both ends (``_complete_junctions``: both meet other lines there) gives a
 piece from 7 px (``corner_piece_min_support_px``): Canny loses a pixel or two at each corner, so a
 whole edge of 9 to 10 px between two corners spans 7, where a free run of 7 px is as likely texture
 or noise. On ``make suite`` against 8 px for both: completeness median 0.609 -> 0.624 (worst 0.269 ->

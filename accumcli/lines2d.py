@@ -70,9 +70,9 @@ class LineParams:
     max_gap_px: float = 3.0           # a longer gap along a line ends a run of support
     end_extension_px: float = 2.5     # pieces reach this far beyond a run's first and last pixel
     junction_radius_px: float = 7.0   # runs ending this near another line's run meet it at the corner
-    chain_min_support_px: float = 10.0  # chains: a straight chain needs this span of edge pixels ...
-    piece_min_support_px: float = 8.0   # ... and a piece on it (a run of its support) this span,
-    corner_piece_min_support_px: float = 7.0   # or this one between two corners (both ends meet other lines)
+    chain_min_support_px: float = 10.0  # chains: a shorter straight chain is not cut at a bend
+    piece_min_support_px: float = 8.0   # a piece needs a run of support of this span,
+    corner_piece_min_support_px: float = 7.0   # or this one grown to a corner at both ends (at most the above)
     detector: str = "chains"
 
 
@@ -412,8 +412,9 @@ def local_segments(points: EdgePoints, labels: np.ndarray, params: LineParams,
     piece is L long). ``line_fit``: a piece lies on its line's fit (direction the line's, centre
     the line's point at the piece's mean position along it) instead of its own pixels' fit; for
     labels that are straight by construction, whose whole fit is steadier than a few pixels'.
-    ``corner_min_support_px``: a run whose two ends both meet other lines at corners
-    (``_complete_junctions`` grows both) needs only this span of pixels, not ``min_support_px``.
+    ``corner_min_support_px``: a run that ``_complete_junctions`` grows to a corner at both ends
+    needs only this span of pixels, if less than ``min_support_px`` (a run already reaching its
+    corner is not grown, and needs ``min_support_px``).
     """
     on_line = np.flatnonzero(labels >= 0)
     if len(on_line) == 0:

@@ -43,10 +43,13 @@ alternatives, and the next frames refine from those poses too until one frame is
 (``PoseTracker._carried``). Every estimate carries its
 figures and the standard deviations of its last Gauss-Newton step (``PoseEstimate.figures``).
 
-While a sequence is tracked, the coverage that ``min_coverage`` judges also weighs each segment by
-its found rate (``found_memory``, ``PoseTracker._remember_found``; ``coverage_found``): how much of it
-the recent tracked frames found on edges in both images, an exponential average taking 0.3 of each
-tracked frame's share, at least 0.1, and forgotten at a start or a re-acquisition (another aspect).
+While a sequence is tracked, the coverage that the verdict (``judge``) holds against
+``min_coverage`` also weighs each segment by its found rate (``found_memory``,
+``PoseTracker._remember_found``; ``coverage_found``): how much of it the recent tracked frames found
+on edges in both images, an exponential average taking 0.3 of each tracked frame's share, at least
+0.1, and forgotten at a given pose (a start) and where no motion is known (no tracked frame within
+``max_gap_s``: any aspect may show). The same verdict decides whether a search's pose covers
+``reacquire_min_coverage`` and whether a candidate the images show as well is a rival (``decide``).
 Why: the model has no surfaces to z-buffer, and its cones of views do not say what the object hides
 from an aspect between those it was built from. On the tracking scoreboard's sim_203, frames 21-22,
 45 % of the expected weight lay on edges the truth says were not seen, and the true pose covered
@@ -58,8 +61,8 @@ third frame dropped (dev_steps_track, the six simulated rows, the teabox; up to 
 frames more tracked, none fewer, and the one false frame they had before neither gone nor joined;
 21 runs off the scoreboard (a model of dev_steps' first 6 frames on dev_steps_track, five devset
 recordings and random scenes of seeds 5 to 19 tracked with their own models): the same to the digit.
-Only that threshold: the ranking, the margins over rivals and the fit take the coverage of all
-expected segments. Weighed there too, the rates favoured the pose being followed over its rivals
+The ranking, the margins over rivals and the fit take the coverage of all expected segments:
+weighed there too, the rates favoured the pose being followed over its rivals
 (dev_cube_small with its own model: 2 -> 5 frames tracked 3 to 20 deg off), and weighing the fit put
 a frame of sim_201 9.9 mm off as tracked and moved the teabox 1.1 -> 1.9 mm (median) from the peer.
 
@@ -185,14 +188,14 @@ class TrackParams:
                                              # from its best pose turned by this
     suspect_rms_ratio: float | None = 1.5    # ... and so does one verified at this many times the recent RMS
     suspect_limit_share: float = 0.75        # and above this share of max_rms_px (little margin under the limit)
-    suspect_coverage_drop: float | None = 0.15   # ... and one this far under the recent coverage (restarts only)
-    recent_frames: int = 5                   # (the median RMS of the last this many tracked frames, at least one)
+    suspect_coverage_drop: float | None = 0.15   # restarts (only) too: one verified this far under the recent coverage
+    recent_frames: int = 5                   # (the median RMS and coverage of the last this many tracked frames)
     suspect_is_lost: bool = True             # a frame still suspect after its restarts is 'lost' (``update``)
     rival_slack: float = 0.2                 # an unverified rival's RMS may exceed the limit by this share (decide)
     max_jump_deg: float = 30.0               # a pose this far from the motion prediction is not believed
     max_jump_m: float = 0.05                 # (while the last tracked frame is at most max_gap_s ago)
     found_memory: float | None = 0.3         # min_coverage judges a coverage weighed by found rates, taking this
-    min_found_rate: float = 0.1              # share of each tracked frame's, at least this (``PoseTracker``; None: not)
+    min_found_rate: float = 0.1              # share of each tracked frame's (None: none), at least this (``PoseTracker``)
     prior_deg: float | None = None           # a Gaussian prior about the start pose per axis (see _gauss_newton);
     prior_mm: float | None = None            # None: none (the tracker); --motion tracked's links set it
 
@@ -627,11 +630,11 @@ def _verify(T: np.ndarray, points_obj: np.ndarray, measurements, intr: StereoInt
     return judge(estimate, params)
 
 
-def _found_per_segment(on_edges: np.ndarray, counted: np.ndarray, owner: np.ndarray, segments: np.ndarray) -> tuple:
-    """(indices (K,) into the accepted segments, share (K,)): per segment with a sample ``counted`` (S,),
+def _found_per_segment(on_edges: np.ndarray, expected: np.ndarray, owner: np.ndarray, segments: np.ndarray) -> tuple:
+    """(indices (K,) into the accepted segments, share (K,)): per segment with an ``expected`` (S,) sample,
     the share of those samples ``on_edges`` (S,) (``owner`` (S,) indexes ``segments``)."""
-    expecting = np.bincount(owner, weights=counted, minlength=len(segments))
-    hits = np.bincount(owner, weights=on_edges & counted, minlength=len(segments))
+    expecting = np.bincount(owner, weights=expected, minlength=len(segments))
+    hits = np.bincount(owner, weights=on_edges & expected, minlength=len(segments))
     shown = expecting > 0
     return segments[shown], hits[shown] / expecting[shown]
 
@@ -675,9 +678,10 @@ def _image_failures(e: PoseEstimate, p: TrackParams) -> list[str]:
         failed.append(f"inlier fraction {fraction:.2f} (needs {p.min_inlier_fraction:.2f})")
     if not e.residual_px <= p.max_rms_px:
         failed.append(f"RMS {e.residual_px:.2f} px (needs <= {p.max_rms_px:.2f})")
-    covered = e.coverage_found if np.isfinite(e.coverage_found) else e.coverage
+    weighed = bool(np.isfinite(e.coverage_found))
+    covered = e.coverage_found if weighed else e.coverage
     if not covered >= p.min_coverage:
-        weighed = "" if covered is e.coverage else f" weighed by what recent frames found ({e.coverage:.2f} unweighed)"
+        weighed = f" weighed by what recent frames found ({e.coverage:.2f} unweighed)" if weighed else ""
         failed.append(f"coverage {covered:.2f} in both images{weighed} (needs {p.min_coverage})")
     if not e.shown >= p.min_shown:
         failed.append(f"{e.shown:.1%} of the model expected in view (needs {p.min_shown:.0%})")
@@ -779,7 +783,7 @@ RANSAC_MIN_SURE = 8      # segments of sure direction enough to draw RANSAC's pa
 
 
 def ransac_pose(model: Segments, observed: Segments, rng: np.random.Generator | None = None,
-                samples: int = 600, candidates: int = 4, keep: int = 1, sure_deg: float | None = 4.0) -> RansacResult:
+                samples: int = 600, candidates: int = 4, keep: int = 1, sure_deg: float | None = None) -> RansacResult:
     """Poses T_camera_object from 3D segments of a frame (camera frame) and a model's accepted
     segments (object frame), each with its support (model segments that land on an extracted one).
     Keeps up to ``keep`` distinct poses, best first (a symmetric object has several poses of nearly
@@ -792,7 +796,7 @@ def ransac_pose(model: Segments, observed: Segments, rng: np.random.Generator | 
     the chessboard's 732 segments; now 0.4 s, the tracking scoreboard the same).
 
     Pairs are drawn from the segments (of the model, of the frame) whose direction sigma is at most
-    ``sure_deg`` (``_pairs``): the invariants of a pair (the angle and the distance between its two
+    ``sure_deg`` (``_pairs``; None: from all; the tracker gives ``TrackParams.ransac_sure_deg``): the invariants of a pair (the angle and the distance between its two
     lines) are only as sure as its directions, and pairs of unsure short pieces match wrong model
     pairs and crowd out the right ones. With the models of the corner pieces
     (``LineParams.corner_piece_min_support_px``), whose frames hold more short pieces, the
@@ -913,6 +917,12 @@ def _rank(estimate: PoseEstimate) -> tuple:
     return (estimate.status == "tracked", round(estimate.coverage / 0.02),
             -round(np.log(max(rms, 1e-3)) / np.log(1.1)) if np.isfinite(rms) else -np.inf,
             round(np.log1p(estimate.inliers) / np.log(1.05)), -rms)
+
+
+def _verified_best(candidates: list[PoseEstimate]) -> PoseEstimate | None:
+    """The best of ``candidates`` (``_rank``) if it is 'tracked', else None."""
+    best = max(candidates, key=_rank, default=None)
+    return best if best is not None and best.status == "tracked" else None
 
 
 def _distinct(a: PoseEstimate, b: PoseEstimate, params: TrackParams) -> bool:
@@ -1177,9 +1187,9 @@ class PoseTracker:
         the right frames of the tracking bench that jumped by 1.6 to 1.7 times stayed under 0.7 of it,
         and restarting them cost 15 % of the tracking time."""
         p = self.params
-        best = max(candidates, key=_rank, default=None)
+        best = _verified_best(candidates)
         return bool(p.suspect_rms_ratio and self._recent_rms and best is not None
-                    and best.status == "tracked" and best.residual_px > p.suspect_limit_share * p.max_rms_px
+                    and best.residual_px > p.suspect_limit_share * p.max_rms_px
                     and best.residual_px > p.suspect_rms_ratio * float(np.median(self._recent_rms)))
 
     def _coverage_fell(self, candidates: list[PoseEstimate]) -> bool:
@@ -1195,9 +1205,8 @@ class PoseTracker:
         restarts cost the tracking bench (``make bench``) 15 % of its time (53 -> 45 frames/s): an
         object turning to a poorer aspect runs them too."""
         p = self.params
-        best = max(candidates, key=_rank, default=None)
+        best = _verified_best(candidates)
         return bool(p.suspect_coverage_drop is not None and self._recent_coverage and best is not None
-                    and best.status == "tracked"
                     and best.coverage < float(np.median(self._recent_coverage)) - p.suspect_coverage_drop)
 
     def update(self, frame: StereoFrame, T_guess: np.ndarray | None = None,
@@ -1240,7 +1249,7 @@ class PoseTracker:
         grads = _gradients(frame, p, gradients)
         gap = (frame.timestamp_ns - self.history[-1][0]) * 1e-9 if self.history else None
         reacquiring = T_guess is None and (gap is None or gap > p.max_gap_s)
-        if reacquiring or T_guess is not None:    # a start, or any aspect: what was found lately says nothing
+        if reacquiring or T_guess is not None:    # a start, or no motion known (any aspect may show): forget
             self._accepted.extra.pop(FOUND_RATE, None)
         guesses = [T_guess] if T_guess is not None else self.predict(frame.timestamp_ns)
         # the better start first; the other too unless the first verifies and the two are not distinct

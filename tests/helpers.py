@@ -33,7 +33,7 @@ def write(path, n=5, *, skip_topics=(), corrupt_left=(), unpaired_right=(), tf_q
           encoding="png", images=None) -> str:
     """A small recording; the options break it in the named ways. ``images``: the image of index i
     (the right image of frame i is image i + 100; default ``image``, noise)."""
-    image = images or globals()["image"]
+    image_of = images or image
     with RecordingWriter(path) as w:
         for side in ("left", "right"):
             if f"/stereo/{side}/calibration" not in skip_topics:
@@ -49,14 +49,14 @@ def write(path, n=5, *, skip_topics=(), corrupt_left=(), unpaired_right=(), tf_q
                 if i in corrupt_left:
                     from accumcli.recording.messages import image_to_msg
 
-                    msg = image_to_msg(image(i), t, "camera_left", "png")
+                    msg = image_to_msg(image_of(i), t, "camera_left", "png")
                     msg.data = b"\x89PNG garbage"
                     w._writer.write_message("/stereo/left/image", msg, log_time=t, publish_time=t)
                 else:
-                    w.image("/stereo/left/image", image(i), t, "camera_left", encoding)
+                    w.image("/stereo/left/image", image_of(i), t, "camera_left", encoding)
             if "/stereo/right/image" not in skip_topics:
                 shift = 20_000_000 if i in unpaired_right else 0
-                w.image("/stereo/right/image", image(i + 100), t + shift, "camera_right", encoding)
+                w.image("/stereo/right/image", image_of(i + 100), t + shift, "camera_right", encoding)
     return str(path)
 
 

@@ -147,16 +147,16 @@ def test_segments_the_tracked_frames_do_not_find_count_less_in_the_coverage(nois
     model = concatenate([real, hidden], real.frame_id)
     with Recording(exact) as rec:
         frames = list(rec.frames(0, 8))
-    runs = {}
+    runs, restarts = {}, {}
     for memory in (0.3, None):
         tracker = PoseTracker(model, TrackParams(found_memory=memory))
         runs[memory] = [tracker.update(f, f.T_camera_object if f.index == 0 else None) for f in frames]
-        restart = tracker.update(frames[-1], frames[-1].T_camera_object)
+        restarts[memory] = tracker.update(frames[-1], frames[-1].T_camera_object)
     alone = PoseTracker(real)
     clean = [alone.update(f, f.T_camera_object if f.index == 0 else None) for f in frames]
     learnt, forgetting = runs[0.3], runs[None]
     assert all(e.status == "tracked" for e in learnt + forgetting)
-    assert np.isnan(learnt[0].coverage_found) and np.isnan(restart.coverage_found)   # nothing known yet / forgotten
+    assert np.isnan(learnt[0].coverage_found) and np.isnan(restarts[0.3].coverage_found)   # nothing known / forgotten
     assert all(np.isnan(e.coverage_found) for e in forgetting)
     for a, b in zip(learnt, forgetting):           # the coverage of all expected segments is not weighed
         assert abs(a.coverage - b.coverage) < 0.02
@@ -231,7 +231,6 @@ def test_ransac_recovers_a_pose_from_3d_segments():
     assert result.reason == "" and result.hypotheses[0][1] == result.support
 
 
-
 def test_ransac_draws_its_pairs_from_segments_sure_of_their_direction():
     """Pairs of unsure pieces (the frame's short ones) match wrong model pairs: ``_pairs`` draws from
     the segments whose direction sigma is within ``sure_deg`` when at least 8 are, else from all."""
@@ -250,7 +249,7 @@ def test_ransac_draws_its_pairs_from_segments_sure_of_their_direction():
     assert np.any(i >= 5) and np.any(j >= 5)
 
 
-def test_a_frame_covering_much_less_than_the_recent_ones_restarts(noisy_pair, model_of_exact):
+def test_a_frame_covering_much_less_than_the_recent_ones_restarts(model_of_exact):
     """``_coverage_fell``: a verified best 0.15 or more under the recent frames' median coverage."""
     tracker = PoseTracker(model_of_exact)
     assert not tracker._coverage_fell([_estimate(np.eye(4), 0.50)])       # no tracked frame yet
@@ -260,6 +259,7 @@ def test_a_frame_covering_much_less_than_the_recent_ones_restarts(noisy_pair, mo
     assert not tracker._coverage_fell([_estimate(np.eye(4), 0.40, "lost")])   # a lost frame restarts anyway
     tracker.params = replace(tracker.params, suspect_coverage_drop=None)
     assert not tracker._coverage_fell([_estimate(np.eye(4), 0.30)])
+
 
 def test_track_command_writes_poses_json_and_mcap(noisy_pair, tmp_path):
     from mcap.reader import make_reader
