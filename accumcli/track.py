@@ -603,9 +603,8 @@ def _verify(T: np.ndarray, points_obj: np.ndarray, measurements, intr: StereoInt
     per_side = _residuals(P, measurements, intr)
     near = [found & (np.abs(r) <= params.inlier_px) for r, found, _ in per_side]
     both = near[0] & near[1]
-    coverage = float(np.sum(expected * both) / max(np.sum(expected), 1e-9))
-    counted = expected if found_rate is None else expected * found_rate
-    coverage_found = float("nan") if found_rate is None else float(np.sum(counted * both) / max(np.sum(counted), 1e-9))
+    coverage = _weighted_share(expected, both)
+    coverage_found = float("nan") if found_rate is None else _weighted_share(expected * found_rate, both)
     r = np.abs(np.concatenate([res[found] for res, found, _ in per_side]))
     inliers = r <= params.inlier_px
     rms = float(np.sqrt(np.mean(r[inliers] ** 2))) if inliers.any() else float("inf")
@@ -628,6 +627,11 @@ def _verify(T: np.ndarray, points_obj: np.ndarray, measurements, intr: StereoInt
                             information=information, pivot=pivot, shown=shown,
                             segment_found=_found_per_segment(both, expected > 0, owner, segments))
     return judge(estimate, params)
+
+
+def _weighted_share(weights: np.ndarray, hits: np.ndarray) -> float:
+    """The share of ``weights`` (S,) on the samples that ``hits`` (S,) marks."""
+    return float(np.sum(weights * hits) / max(np.sum(weights), 1e-9))
 
 
 def _found_per_segment(on_edges: np.ndarray, expected: np.ndarray, owner: np.ndarray, segments: np.ndarray) -> tuple:
@@ -681,8 +685,8 @@ def _image_failures(e: PoseEstimate, p: TrackParams) -> list[str]:
     weighed = bool(np.isfinite(e.coverage_found))
     covered = e.coverage_found if weighed else e.coverage
     if not covered >= p.min_coverage:
-        weighed = f" weighed by what recent frames found ({e.coverage:.2f} unweighed)" if weighed else ""
-        failed.append(f"coverage {covered:.2f} in both images{weighed} (needs {p.min_coverage})")
+        how = f" weighed by what recent frames found ({e.coverage:.2f} unweighed)" if weighed else ""
+        failed.append(f"coverage {covered:.2f} in both images{how} (needs {p.min_coverage})")
     if not e.shown >= p.min_shown:
         failed.append(f"{e.shown:.1%} of the model expected in view (needs {p.min_shown:.0%})")
     return failed
