@@ -143,6 +143,9 @@ def extraction_options(func):
         click.option("--critical-ends/--no-critical-ends", default=True, show_default=True,
                      help="Triangulate such critical segments from their edge's ends, where disparity is "
                           "defined (--no-critical-ends: reject them, as the paper does)."),
+        click.option("--right-search/--no-right-search", default=True, show_default=True,
+                     help="Search the right image along the rows of left segments left unmatched, at their "
+                          "matched neighbours' disparities, for an edge its segment detector missed."),
         click.option("--row-offset", type=click.FloatRange(-5.0, 5.0), default=0.0, show_default=True,
                      metavar="PX",
                      help="The right image's rows lie this many pixels below the left's (a calibration a "
@@ -158,6 +161,7 @@ def extraction_options(func):
     @functools.wraps(func)
     def wrapper(*args, **kwargs):
         from .extract import ExtractParams
+        from .guided import GuidedParams
         from .lines2d import LineParams
         from .stereo import StereoParams
 
@@ -166,7 +170,8 @@ def extraction_options(func):
             LineParams(detector=kwargs.pop("detector"), segment_length_px=kwargs.pop("segment_length"),
                        gradient_threshold=kwargs.pop("gradient_threshold")),
             StereoParams(min_depth_m=near, max_depth_m=far, critical_angle_deg=kwargs.pop("critical_angle"),
-                         critical_by_ends=kwargs.pop("critical_ends"), row_offset_px=kwargs.pop("row_offset")))
+                         critical_by_ends=kwargs.pop("critical_ends"), row_offset_px=kwargs.pop("row_offset")),
+            GuidedParams(enabled=kwargs.pop("right_search")))
         return func(*args, **kwargs)
 
     return wrapper

@@ -1,6 +1,7 @@
 """One stereo frame in, local 3D line segments (left camera frame) out:
-2D local segments in both images (``lines2d``), stereo matching and
-triangulation (``stereo``), with a per-stage time breakdown. The frame's image
+2D local segments in both images (``lines2d``), stereo matching (``stereo``), a
+search of the right image for the left segments matching left alone (``guided``)
+and triangulation (``stereo``), with a per-stage time breakdown. The frame's image
 gradients are returned too, for tracking in the same frame to reuse."""
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import numpy as np
 from .lines2d import DETECTORS, Gradients, LineParams, Segments2D, StageTimes
 from .recording import StereoFrame
 from .critical import triangulate_critical
+from .guided import GuidedParams, guided_matches
 from .segments import Segments, concatenate
 from .stereo import Matches, StereoParams, match, triangulate
 
@@ -21,6 +23,7 @@ from .stereo import Matches, StereoParams, match, triangulate
 class ExtractParams:
     lines: LineParams = field(default_factory=LineParams)
     stereo: StereoParams = field(default_factory=StereoParams)
+    guided: GuidedParams = field(default_factory=GuidedParams)
 
 
 @dataclass
@@ -63,6 +66,8 @@ def extract_frame(frame: StereoFrame, params: ExtractParams = ExtractParams(), c
     left, right = sides
     t0 = time.perf_counter()
     m: Matches = match(frame.left, frame.right, left, right, frame.intrinsics, params.stereo)
+    m, right = guided_matches(frame.left, frame.right, left, right, m, grads[1], frame.intrinsics, params.stereo,
+                              params.guided)
     t0 = times.add("matching", t0)
     segments, kept = triangulate(left, right, m, frame.intrinsics, params.stereo, camera_frame)
     t0 = times.add("triangulation", t0)
