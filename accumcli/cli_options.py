@@ -143,9 +143,10 @@ def extraction_options(func):
         click.option("--critical-ends/--no-critical-ends", default=True, show_default=True,
                      help="Triangulate such critical segments from their edge's ends, where disparity is "
                           "defined (--no-critical-ends: reject them, as the paper does)."),
-        click.option("--right-search/--no-right-search", default=True, show_default=True,
+        click.option("--right-search/--no-right-search", default=False, show_default=True,
                      help="Search the right image along the rows of left segments left unmatched, at their "
-                          "matched neighbours' disparities, for an edge its segment detector missed."),
+                          "matched neighbours' disparities, for an edge its segment detector missed: a "
+                          "fuller model, at some cost to single-frame precision and to tracking with it."),
         click.option("--row-offset", type=click.FloatRange(-5.0, 5.0), default=0.0, show_default=True,
                      metavar="PX",
                      help="The right image's rows lie this many pixels below the left's (a calibration a "

@@ -21,6 +21,19 @@ direction comes from its own short line, so its 3D direction is as unsure as a l
 (``stereo.triangulate`` says so in its sigma); what it brings is the edge's place in 3D and its view
 plane, to accumulation. Searching by patch score (NCC) instead found half as many, and on the
 devset 1 in 7 of those wrong against 1 in 10 by votes.
+
+Off by default (``accum extract`` / ``accumulate --right-search`` switch it on). Measured with it
+against without, ``make suite``: completeness median 0.624 -> 0.636, worst row 0.271 -> 0.293
+(higher on 15 of 19 rows; the same gain, 0.617 -> 0.626 and 0.245 -> 0.271, with every image read
+shifted by 0.004 px), single-frame correct 3D higher on every row (median 0.418 -> 0.431); but the
+single-frame near-object precision median 0.753 -> 0.737 (its pieces' directions are a lone piece's),
+precision rows under 0.95 2 -> 4 (within the rows' noise), and tracking with its models was less
+safe: over four runs of the tracking scoreboard with image reads shifted by 0, +-0.004 and 0.008 px,
+frames tracked more than 3 deg or 5 mm off in 3 of the 4 runs (sim_206 where the object turns to an
+aspect its model barely covers, dev_steps) against 1 of 4 without, and on the 21 off-scoreboard runs
+11 false frames against 5. The tracker's verdict, not the search, is what that measures (the same
+shifts alone move the off-scoreboard count from 4 to 12 on four of those runs), but until it holds,
+the default keeps the models that tracking was verified with.
 """
 
 from __future__ import annotations
@@ -41,7 +54,7 @@ REFERENCE_PAIRS = 64  # of the frame's matches, scored again with the found piec
 
 @dataclass(frozen=True)
 class GuidedParams:
-    enabled: bool = True
+    enabled: bool = False
     neighbour_px: float = 40.0   # matched left pieces this near (the ``NEIGHBOURS`` nearest) give the prior ...
     margin_px: float = 3.0       # ... their disparities' range widened by this ...
     max_range_px: float = 48.0   # ... and searched only if at most this wide

@@ -87,9 +87,14 @@ def real_and_independent_rows() -> list[Row]:
     return rows
 
 
-def score(row: Row, view_planes: bool = True, motion: str = "gripper") -> dict:
+def score(row: Row, view_planes: bool = True, motion: str = "gripper", right_search: bool = False) -> dict:
     """Extract (with 2D segments), evaluate the frames; accumulate (``view_planes`` False: with
-    ``accum accumulate --average-directions``; ``motion``: its ``--motion``), evaluate the model."""
+    ``accum accumulate --average-directions``; ``motion``: its ``--motion``; ``right_search``: both
+    with ``--right-search``), evaluate the model."""
+    from dataclasses import replace
+
+    from accumcli.extract import ExtractParams
+    from accumcli.guided import GuidedParams
     from accumcli.runs import (
         RecordingOptions,
         accumulate_recording,
@@ -99,14 +104,16 @@ def score(row: Row, view_planes: bool = True, motion: str = "gripper") -> dict:
 
     options = RecordingOptions(object_frame=row.object_frame)
     # a variant's files apart (make uncertainty reads the default's)
-    suffix = ("" if view_planes else "_average_directions") + ("" if motion == "gripper" else f"_{motion}")
+    suffix = (("" if view_planes else "_average_directions") + ("" if motion == "gripper" else f"_{motion}")
+              + ("_right_search" if right_search else ""))
+    extract_params = ExtractParams(guided=GuidedParams(enabled=right_search))
+    params = replace(accumulate_params(view_planes, motion), extract=extract_params)
     out = CACHE / f"suite{suffix}"
     out.mkdir(parents=True, exist_ok=True)
     frames_file, model_file = out / f"{row.name}.frames.jsonl", out / f"{row.name}.model.json"
-    extract_recording(row.path, str(frames_file), options=options, with_2d=True)
+    extract_recording(row.path, str(frames_file), params=extract_params, options=options, with_2d=True)
     figures = evaluate_file(str(frames_file), row.truth)
-    result = accumulate_recording(row.path, [str(model_file)], options=options,
-                                  params=accumulate_params(view_planes, motion))
+    result = accumulate_recording(row.path, [str(model_file)], options=options, params=params)
     figures.update(evaluate_file(str(model_file), row.truth, support_face=row.support_face))
     if "surface_precision" in figures:   # judged by surface where the truth has faces (teabox README)
         figures["precision"], figures["background"] = figures["surface_precision"], figures["surface_background"]
@@ -156,13 +163,16 @@ def main(argv=None) -> int:
                         help="accumulate with --average-directions (a variant: docs/suite.md is not written)")
     parser.add_argument("--motion", choices=["gripper", "tracked"], default="gripper",
                         help="accumulate with this --motion (tracked: a variant, docs/suite.md is not written)")
+    parser.add_argument("--right-search", action="store_true",
+                        help="extract and accumulate with --right-search (a variant: docs/suite.md is not written)")
     args = parser.parse_args(argv)
-    variant = args.average_directions or args.motion != "gripper"
+    variant = args.average_directions or args.motion != "gripper" or args.right_search
     rows = simulated_rows() + real_and_independent_rows()
     if args.only:
         rows = [r for r in rows if args.only in r.name]
     t0 = time.perf_counter()
-    results = score_rows(rows, functools.partial(score, view_planes=not args.average_directions, motion=args.motion))
+    results = score_rows(rows, functools.partial(score, view_planes=not args.average_directions, motion=args.motion,
+                                                      right_search=args.right_search))
     lines = table(results, rows)
     print("\n".join(lines))
     print(f"\n{len(rows)} recordings in {time.perf_counter() - t0:.0f} s")

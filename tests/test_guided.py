@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 
 from accumcli.extract import ExtractParams, extract_frame
@@ -13,6 +11,7 @@ from accumcli.stereo import match
 
 from .scenes import INTRINSICS, quad, render_pair
 
+ON = GuidedParams(enabled=True)
 DEPTH = 0.5
 RIGHT_SIDE_X = 0.05    # the rectangle's right side, metres (left camera frame)
 
@@ -55,7 +54,7 @@ def test_a_missed_right_edge_is_found_at_its_true_disparity():
     left, right, right_gradients, params, m, side = _without_right_side(frame)
     assert len(side) >= 4 and not np.isin(side, m.left).any()     # the side is unmatched without the search
     found, extended = guided_matches(frame.left, frame.right, left, right, m, right_gradients, INTRINSICS,
-                                     params.stereo)
+                                     params.stereo, ON)
     new = np.isin(found.left, side)
     assert new.sum() >= len(side) - 1
     truth = INTRINSICS.fx * INTRINSICS.baseline / DEPTH
@@ -77,7 +76,7 @@ def test_a_piece_is_left_alone_where_a_second_edge_of_its_polarity_lies_beside_t
     right_image[:, u + 3:u + 5] = right_image[:, u - 6:u - 4]   # a dark band: another dark-to-bright edge at u + 5
     left, right, right_gradients, params, m, side = _without_right_side(frame, right_image, reach_px=8.0)
     assert not np.isin(side, m.left).any()
-    wide = GuidedParams(margin_px=8.0)     # the rival lies within the searched range
+    wide = GuidedParams(enabled=True, margin_px=8.0)     # the rival lies within the searched range
     found, _ = guided_matches(frame.left, right_image, left, right, m, right_gradients, INTRINSICS, params.stereo, wide)
     assert not np.isin(found.left, side).any()
     # without the band the same range finds them: the band is what stops it
@@ -89,7 +88,7 @@ def test_a_piece_is_left_alone_where_a_second_edge_of_its_polarity_lies_beside_t
 def test_no_search_without_matched_neighbours_or_when_disabled():
     frame = _frame()
     left, right, right_gradients, params, m, side = _without_right_side(frame)
-    far = GuidedParams(neighbour_px=0.5)     # no matched piece this near any unmatched one
+    far = GuidedParams(enabled=True, neighbour_px=0.5)     # no matched piece this near any unmatched one
     found, extended = guided_matches(frame.left, frame.right, left, right, m, right_gradients, INTRINSICS,
                                      params.stereo, far)
     assert found is m and extended is right
@@ -100,8 +99,8 @@ def test_no_search_without_matched_neighbours_or_when_disabled():
 
 def test_extraction_triangulates_the_found_pieces_on_the_edge():
     frame = _frame(seed=3)
-    with_search = extract_frame(frame, ExtractParams())
-    without = extract_frame(frame, ExtractParams(guided=replace(GuidedParams(), enabled=False)))
+    with_search = extract_frame(frame, ExtractParams(guided=ON))
+    without = extract_frame(frame, ExtractParams())     # off by default
     assert len(with_search.segments) >= len(without.segments)
     seg = with_search.segments
     on = (np.abs(seg.centers[:, 0] - RIGHT_SIDE_X) < 0.005) & (np.abs(seg.centers[:, 1]) < 0.05)
