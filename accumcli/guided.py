@@ -22,18 +22,20 @@ direction comes from its own short line, so its 3D direction is as unsure as a l
 plane, to accumulation. Searching by patch score (NCC) instead found half as many, and on the
 devset 1 in 7 of those wrong against 1 in 10 by votes.
 
-Off by default (``accum extract`` / ``accumulate --right-search`` switch it on). Measured with it
-against without, ``make suite``: completeness median 0.624 -> 0.636, worst row 0.271 -> 0.293
-(higher on 15 of 19 rows; the same gain, 0.617 -> 0.626 and 0.245 -> 0.271, with every image read
-shifted by 0.004 px), single-frame correct 3D higher on every row (median 0.418 -> 0.431); but the
-single-frame near-object precision median 0.753 -> 0.737 (its pieces' directions are a lone piece's),
-precision rows under 0.95 2 -> 4 (within the rows' noise), and tracking with its models was less
-safe: over four runs of the tracking scoreboard with image reads shifted by 0, +-0.004 and 0.008 px,
-frames tracked more than 3 deg or 5 mm off in 3 of the 4 runs (sim_206 where the object turns to an
-aspect its model barely covers, dev_steps) against 1 of 4 without, and on the 21 off-scoreboard runs
-11 false frames against 5. The tracker's verdict, not the search, is what that measures (the same
-shifts alone move the off-scoreboard count from 4 to 12 on four of those runs), but until it holds,
-the default keeps the models that tracking was verified with.
+Off by default (``--right-search`` switches it on). Measured with it against without, ``make
+suite``: completeness median 0.624 -> 0.636, worst row 0.271 -> 0.293 (higher on 15 of 19 rows; the
+same gain, 0.617 -> 0.626 and 0.245 -> 0.271, with every image read shifted by 0.004 px: the
+scoreboard's noise), single-frame correct 3D higher on every row (median 0.418 -> 0.431); the costs:
+the single-frame near-object precision median 0.753 -> 0.737 (its pieces' directions are a lone
+piece's), precision rows under 0.95 2 -> 4 (within the rows' noise of about 0.03), extraction about
+2 ms a frame. What keeps it off is tracking with its models: over four runs of the tracking
+scoreboard with image reads shifted by 0, +-0.004 and 0.008 px, sim_206 turns to an aspect its
+model barely covers (3 to 5 % of it in view) and frames there were tracked 3.2 to 5.4 deg off in
+every run (without the search: one false frame in the four runs, dev_steps at 0.008 px); a floor of
+8 % in view (``TrackParams.min_shown``) removed them but lost right frames of the chessboard's
+snapshots, whose many-aspect model shows 3 % of itself at a right pose. On the 21 off-scoreboard
+runs over three shifts it made no difference (11 false frames either way with the ten Gauss-Newton
+steps a level of now).
 """
 
 from __future__ import annotations
