@@ -34,8 +34,8 @@ model barely covers (3 to 5 % of it in view) and frames there were tracked 3.2 t
 every run (without the search: one false frame in the four runs, dev_steps at 0.008 px); a floor of
 8 % in view (``TrackParams.min_shown``) removed them but lost right frames of the chessboard's
 snapshots, whose many-aspect model shows 3 % of itself at a right pose. On the 21 off-scoreboard
-runs over three shifts it made no difference (11 false frames either way with the ten Gauss-Newton
-steps a level of now).
+runs over three shifts it made no difference (11 false frames either way, measured with 10 Gauss-Newton
+steps a level).
 """
 
 from __future__ import annotations
