@@ -66,6 +66,7 @@ def extract_frame(frame: StereoFrame, params: ExtractParams = ExtractParams(), c
     left, right = sides
     t0 = time.perf_counter()
     m: Matches = match(frame.left, frame.right, left, right, frame.intrinsics, params.stereo)
+    detected_right = len(right)
     m, right = guided_matches(frame.left, frame.right, left, right, m, grads[1], frame.intrinsics, params.stereo,
                               params.guided)
     t0 = times.add("matching", t0)
@@ -74,8 +75,9 @@ def extract_frame(frame: StereoFrame, params: ExtractParams = ExtractParams(), c
     by_ends, critical_left = triangulate_critical(frame.left, frame.right, left, tuple(grads), frame.intrinsics,
                                                   params.stereo, camera_frame, segments, left.select(m.left[kept]))
     times.add("critical", t0)
-    counts = {"left_2d": len(left), "right_2d": len(right), "critical": m.critical,
-              "critical_3d": len(by_ends), "unmatched": m.unmatched + (len(m.left) - len(kept)),
+    # right_2d: what the detector found; right_found: what the right-image search added (``guided``)
+    counts = {"left_2d": len(left), "right_2d": detected_right, "right_found": len(right) - detected_right,
+              "critical": m.critical, "critical_3d": len(by_ends), "unmatched": m.unmatched + (len(m.left) - len(kept)),
               "segments": len(segments) + len(by_ends)}
     # a critical segment's 3D comes from its run's ends, not from one right segment: right index -1
     return FrameSegments(frame.index, frame.timestamp_ns, concatenate([segments, by_ends], camera_frame), left,

@@ -15,8 +15,10 @@ where the right image has an edge of the piece's polarity there (a local maximum
 the gradient across the piece, of at least ``min_contrast`` of the piece's own): the best disparity
 needs ``min_rows`` votes and every disparity ``min_gap_px`` or more away at most ``max_rival_rows``
 (an edge parallel to it nearby makes the piece ambiguous, and it is left alone). The right edge is
-then located on each row to sub-pixel (a parabola through the gradient), a line through those points
-is the right piece, and the pair must reach matching's ``min_score`` (``stereo._ncc``). Its
+then located on each row to sub-pixel (a parabola through the gradient, within ``locate_px`` of the
+voted disparity), a line through those points (at most ``max_residual_px`` RMS from them) is the
+right piece, and the pair must pass matching's tests: depth range, orientation difference, and score
+(``stereo._ncc`` less ``stereo.orientation_penalty``) at least ``min_score``. Its
 direction comes from its own short line, so its 3D direction is as unsure as a lone piece's
 (``stereo.triangulate`` says so in its sigma); what it brings is the edge's place in 3D and its view
 plane, to accumulation. Searching by patch score (NCC) instead found half as many, and on the
@@ -45,9 +47,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .lines2d import Gradients, Segments2D, sample
+from .lines2d import Gradients, Segments2D, dot2, parabola_peak, sample
 from .recording import StereoIntrinsics
-from .stereo import Matches, StereoParams, _ncc, angle_from_rows
+from .stereo import Matches, StereoParams, _ncc, angle_from_rows, orientation_penalty
 
 ROWS = 8              # sample rows along a piece, as ``stereo._ncc`` samples it
 NEIGHBOURS = 8        # matched pieces looked at for a piece's disparity prior
@@ -71,71 +73,81 @@ class GuidedParams:
 def guided_matches(left_img: np.ndarray, right_img: np.ndarray, left: Segments2D, right: Segments2D,
                    m: Matches, right_gradients: Gradients, intr: StereoIntrinsics, stereo: StereoParams,
                    params: GuidedParams = GuidedParams()) -> tuple[Matches, Segments2D]:
-    """``m`` with the matches the search adds, and ``right`` with the right pieces they found appended
-    (each on a line of its own)."""
+    """``m`` with the matches the search adds (disparities in px at the left centre's row), and
+    ``right`` (right image, px) with the right pieces they found appended, each on a line of its own
+    (so each is triangulated as a lone piece, even where several lie on one left line)."""
     if not params.enabled or len(m.left) == 0:
         return m, right
     matched = np.zeros(len(left), bool)
     matched[m.left] = True
-    todo = np.flatnonzero((angle_from_rows(left.directions) >= stereo.critical_angle_deg) & ~matched)
-    if len(todo) == 0:
+    pieces_left = np.flatnonzero((angle_from_rows(left.directions) >= stereo.critical_angle_deg) & ~matched)
+    if len(pieces_left) == 0:
         return m, right
-    lo, hi = _disparity_prior(left, m, todo, params)
-    lo = np.maximum(lo, np.floor(intr.fx * intr.baseline / stereo.max_depth_m))
-    hi = np.minimum(hi, np.ceil(intr.fx * intr.baseline / stereo.min_depth_m))
+    d_min, d_max = intr.fx * intr.baseline / stereo.max_depth_m, intr.fx * intr.baseline / stereo.min_depth_m
+    lo, hi = _disparity_prior(left, m, pieces_left, params)
+    lo, hi = np.maximum(lo, np.ceil(d_min)), np.minimum(hi, np.floor(d_max))
     keep = hi >= lo
-    todo, lo, hi = todo[keep], lo[keep], hi[keep]
-    if len(todo) == 0:
+    pieces_left, lo, hi = pieces_left[keep], lo[keep], hi[keep]
+    if len(pieces_left) == 0:
         return m, right
-    best_d, ok = _vote(right_gradients, left, todo, lo, hi, params)
-    todo = todo[ok]
-    pieces, found = _locate(right_gradients, left, todo, best_d[ok], params)
-    todo = todo[found]
-    if len(todo) == 0:
+    best_d, voted = _vote(right_gradients, left, pieces_left, lo, hi, params)
+    pieces_left, best_d = pieces_left[voted], best_d[voted]
+    found, located = _locate(right_gradients, left, pieces_left, best_d, params)
+    pieces_left = pieces_left[located]
+    found = found.select(located)
+    # the left centre's row crosses each found right piece at its centre (``_locate``)
+    disparity = left.centers[pieces_left, 0] - found.centers[:, 0]
+    cos_diff = np.abs(dot2(left.directions[pieces_left], found.directions))
+    plausible = ((disparity >= d_min) & (disparity <= d_max)
+                 & (cos_diff >= np.cos(np.radians(stereo.max_orientation_diff_deg))))
+    pieces_left, found, disparity, cos_diff = (pieces_left[plausible], found.select(plausible), disparity[plausible],
+                                               cos_diff[plausible])
+    if len(pieces_left) == 0:
         return m, right
-    first = int(right.line_id.max()) + 1 if len(right) else 0
-    pieces.line_id = np.arange(first, first + len(todo))
-    extended = _concatenate(right, pieces)
-    new = len(right) + np.arange(len(todo))
-    # scored with some of the frame's matches, so that ``_ncc`` maps the right grey levels to the left's
-    # as it did in matching (``stereo._grey_map_of_pairs``: from 20 pairs or more)
-    known = slice(0, min(len(m.left), REFERENCE_PAIRS))
-    score = _ncc(left_img, right_img, left, extended, np.concatenate([m.left[known], todo]),
-                 np.concatenate([m.right[known], new]), stereo)[-len(todo):]
+    # scored as matching scores (``match``); together with up to ``REFERENCE_PAIRS`` of the frame's
+    # matched pairs, from which ``_ncc`` takes the right grey levels to the left's (it needs 20 pairs)
+    appended = len(right) + np.arange(len(pieces_left))
+    trial = right.concatenate(found)
+    reference = slice(0, min(len(m.left), REFERENCE_PAIRS))
+    score = _ncc(left_img, right_img, left, trial, np.concatenate([m.left[reference], pieces_left]),
+                 np.concatenate([m.right[reference], appended]), stereo)[-len(pieces_left):]
+    score = score - orientation_penalty(cos_diff, stereo)
     take = score >= stereo.min_score
     if not take.any():
         return m, right
-    todo, new, score = todo[take], new[take], score[take]
-    kept = np.concatenate([np.arange(len(right)), new])
-    # the left centre's row crosses each found right piece at its centre (``_locate``)
-    disparity = left.centers[todo, 0] - extended.centers[new, 0]
-    out = Matches(np.concatenate([m.left, todo]), np.concatenate([m.right, len(right) + np.arange(len(todo))]),
+    pieces_left, found, disparity, score = pieces_left[take], found.select(take), disparity[take], score[take]
+    first_line = int(right.line_id.max()) + 1 if len(right) else 0
+    found.line_id = np.arange(first_line, first_line + len(pieces_left))
+    out = Matches(np.concatenate([m.left, pieces_left]),
+                  np.concatenate([m.right, len(right) + np.arange(len(pieces_left))]),
                   np.concatenate([m.disparity, disparity]), np.concatenate([m.score, score]),
-                  m.critical, m.unmatched - len(todo))
-    return out, extended.select(kept)
+                  m.critical, m.unmatched - len(pieces_left))
+    return out, right.concatenate(found)
 
 
 def _disparity_prior(left: Segments2D, m: Matches, todo: np.ndarray, params: GuidedParams):
-    """(T,) lowest and highest disparity to search per piece ``todo`` (inf where no prior): the range of
-    the matched pieces' within ``neighbour_px`` (the ``NEIGHBOURS`` nearest), widened by ``margin_px``."""
+    """(T,) and (T,) the lowest and highest disparity (px, whole) to search per left piece ``todo``
+    (inf and -inf where there is no prior): the range of the matched pieces' within ``neighbour_px``
+    in the left image (the ``NEIGHBOURS`` nearest), widened by ``margin_px``."""
     k = min(NEIGHBOURS, len(m.left))
     distance, index = cKDTree(left.centers[m.left]).query(left.centers[todo], k=k,
                                                           distance_upper_bound=params.neighbour_px)
     distance, index = distance.reshape(len(todo), k), index.reshape(len(todo), k)
-    near = np.isfinite(distance)
-    d = m.disparity[np.where(near, index, 0)]
-    lo = np.floor(np.where(near, d, np.inf).min(axis=1) - params.margin_px)
-    hi = np.ceil(np.where(near, d, -np.inf).max(axis=1) + params.margin_px)
-    bad = ~near.any(axis=1) | (hi - lo > params.max_range_px)
+    neighbour = np.isfinite(distance)
+    d = m.disparity[np.where(neighbour, index, 0)]
+    lo = np.floor(np.where(neighbour, d, np.inf).min(axis=1) - params.margin_px)
+    hi = np.ceil(np.where(neighbour, d, -np.inf).max(axis=1) + params.margin_px)
+    bad = ~neighbour.any(axis=1) | (hi - lo > params.max_range_px)
     lo[bad], hi[bad] = np.inf, -np.inf
     return lo, hi
 
 
 def _vote(right_gradients: Gradients, left: Segments2D, todo, lo, hi, params: GuidedParams):
-    """(T,) the integer disparity in [lo, hi] where most of each piece's rows show a right edge of the
-    piece's polarity and at least ``min_contrast`` of its contrast (a local maximum of the gradient
-    across the piece, within a pixel), its support in rows, and (T,) whether it has ``min_rows``
-    and no disparity ``min_gap_px`` or more away has more than ``max_rival_rows``."""
+    """(T,) per left piece ``todo`` the whole disparity (px) in [lo, hi] that the most of its rows vote
+    for, and (T,) whether it has ``min_rows`` votes and no disparity ``min_gap_px`` or more away more
+    than ``max_rival_rows``. A row votes for a disparity where the right image, along that row, has a
+    local maximum (within a pixel) of the gradient across the piece, of the piece's polarity and at
+    least ``min_contrast`` of its contrast (``Segments2D.contrast``, grey levels per px)."""
     width = int((hi - lo).max()) + 1
     rows, u_left = _rows(left, todo)
     d = lo[:, None] + np.arange(width)                                                   # (T, W)
@@ -145,10 +157,10 @@ def _vote(right_gradients: Gradients, left: Segments2D, todo, lo, hi, params: Gu
     peak = np.zeros(response.shape, bool)
     peak[:, :, 1:-1] = (response[:, :, 1:-1] >= response[:, :, :-2]) & (response[:, :, 1:-1] >= response[:, :, 2:])
     peak &= strong & inside
-    near = peak.copy()
-    near[:, :, 1:] |= peak[:, :, :-1]
-    near[:, :, :-1] |= peak[:, :, 1:]
-    support = near.sum(axis=1)                                                           # (T, W)
+    vote = peak.copy()
+    vote[:, :, 1:] |= peak[:, :, :-1]
+    vote[:, :, :-1] |= peak[:, :, 1:]
+    support = vote.sum(axis=1)                                                           # (T, W)
     best = np.argmax(support, axis=1)
     far = np.abs(np.arange(width)[None, :] - best[:, None]) >= params.min_gap_px
     rival = np.where(far, support, 0).max(axis=1)
@@ -158,19 +170,18 @@ def _vote(right_gradients: Gradients, left: Segments2D, todo, lo, hi, params: Gu
 
 
 def _locate(gradients: Gradients, left: Segments2D, todo, d, params: GuidedParams):
-    """Right pieces (Segments2D, line ids unset) through the right edge found on each piece's rows
-    near disparity ``d``, and (T,) whether enough rows found it on a straight line."""
+    """(T) right pieces (right image, px; line ids 0, ``t`` 0) through the right edge located on each
+    left piece's rows within ``locate_px`` of disparity ``d`` (T,) px, and (T,) whether ``min_rows``
+    rows found it, within ``max_residual_px`` RMS of a straight line."""
     rows, u_left = _rows(left, todo)
     u0 = u_left - d[:, None]
     offsets = np.arange(-params.locate_px, params.locate_px + 0.5)                      # (O,)
     response = _response(gradients, left, todo, u0[:, :, None] + offsets, rows)         # (T, R, O)
     k = np.clip(np.argmax(response, axis=2), 1, len(offsets) - 2)
-    take = np.take_along_axis
-    r0, r1, r2 = (take(response, (k + j)[:, :, None], axis=2)[:, :, 0] for j in (-1, 0, 1))
-    curvature = r0 - 2 * r1 + r2
-    peak = (r1 >= r0) & (r1 >= r2) & (curvature < 0) & (r1 >= params.min_contrast * left.contrast[todo, None])
-    delta = np.where(peak, 0.5 * (r0 - r2) / np.where(curvature < 0, curvature, -1.0), 0.0)
-    edge_u = u0 + offsets[k] + delta                                                     # (T, R)
+    r0, r1, r2 = (np.take_along_axis(response, (k + j)[:, :, None], axis=2)[:, :, 0] for j in (-1, 0, 1))
+    peak = ((r1 >= r0) & (r1 >= r2) & (r0 - 2 * r1 + r2 < 0)
+            & (r1 >= params.min_contrast * left.contrast[todo, None]))
+    edge_u = u0 + offsets[k] + np.where(peak, parabola_peak(r0, r1, r2), 0.0)          # (T, R) px
     w = peak.astype(float)
     n = w.sum(axis=1)
     safe = np.maximum(n, 1.0)
@@ -186,23 +197,20 @@ def _locate(gradients: Gradients, left: Segments2D, todo, d, params: GuidedParam
     contrast = np.where(found, (w * np.max(response, axis=2)).sum(1) / safe, 0.0)
     pieces = Segments2D(centers, direction, left.lengths[todo].copy(), left.polarity[todo].copy(), contrast,
                         np.zeros(len(todo), np.int64), np.zeros(len(todo)), direction.copy())
-    return pieces.select(found), found
+    return pieces, found
 
 
 def _rows(left: Segments2D, todo) -> tuple[np.ndarray, np.ndarray]:
-    """(T, ROWS) rows and columns of points along the left pieces ``todo``, as ``stereo._ncc`` places them."""
+    """(T, ROWS) rows and (T, ROWS) columns (left image, px) of points along the left pieces ``todo``,
+    as ``stereo._ncc`` places them."""
     s = np.linspace(-0.4, 0.4, ROWS)[None, :] * left.lengths[todo][:, None]
     return (left.centers[todo, 1][:, None] + s * left.directions[todo, 1][:, None],
             left.centers[todo, 0][:, None] + s * left.directions[todo, 0][:, None])
 
 
 def _response(gradients: Gradients, left: Segments2D, todo, u: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """The right gradient across the left pieces ``todo`` (along their normal, signed by their polarity)
-    at columns ``u`` (T, R, K) on ``rows`` (T, R)."""
+    """(T, R, K) the right image's gradient (grey levels per px) across the left pieces ``todo`` (along
+    their normal, signed by their polarity) at columns ``u`` (T, R, K) on ``rows`` (T, R), right image px."""
     v = np.broadcast_to(rows[:, :, None], u.shape)
     normal = np.column_stack([-left.directions[todo, 1], left.directions[todo, 0]]) * left.polarity[todo, None]
     return sample(gradients.gx, u, v) * normal[:, None, None, 0] + sample(gradients.gy, u, v) * normal[:, None, None, 1]
-
-
-def _concatenate(a: Segments2D, b: Segments2D) -> Segments2D:
-    return Segments2D(*(np.concatenate([getattr(a, f), getattr(b, f)]) for f in a.__dataclass_fields__))

@@ -104,6 +104,9 @@ class Segments2D:
     def select(self, index) -> "Segments2D":
         return Segments2D(*(getattr(self, f)[index] for f in self.__dataclass_fields__))
 
+    def concatenate(self, other: "Segments2D") -> "Segments2D":
+        return Segments2D(*(np.concatenate([getattr(self, f), getattr(other, f)]) for f in self.__dataclass_fields__))
+
     @property
     def normals(self) -> np.ndarray:
         return np.column_stack([-self.directions[:, 1], self.directions[:, 0]])

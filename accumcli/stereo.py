@@ -196,8 +196,7 @@ def match(left_img: np.ndarray, right_img: np.ndarray, left: Segments2D, right: 
     li, rj, disparity, cos_diff = li[ok], rj[ok], disparity[ok], cos_diff[ok]
     if len(li) == 0:
         return empty
-    score = _ncc(left_img, right_img, left, right, li, rj, params) - params.orientation_weight * (
-        np.degrees(np.arccos(np.clip(cos_diff, -1, 1))) / params.max_orientation_diff_deg) ** 2
+    score = _ncc(left_img, right_img, left, right, li, rj, params) - orientation_penalty(cos_diff, params)
     # best local segment per (left segment, right line), then the ratio test between right lines
     n_right_lines = int(right.line_id.max()) + 1
     best = best_per_key(li * n_right_lines + right.line_id[rj], -score)
@@ -222,6 +221,13 @@ def match(left_img: np.ndarray, right_img: np.ndarray, left: Segments2D, right: 
     accept |= _propagate(left, right, li, rj, disparity, score, accept, params)
     k = np.flatnonzero(accept)
     return Matches(li[k], rj[k], disparity[k], score[k], int(critical_l.sum()), len(usable_l) - len(k))
+
+
+def orientation_penalty(cos_diff: np.ndarray, params: StereoParams) -> np.ndarray:
+    """(P,) what a pair's score loses for the angle between its two image lines (``cos_diff``, (P,)
+    |cos|): ``orientation_weight`` at ``max_orientation_diff_deg``, quadratic below it."""
+    return params.orientation_weight * (np.degrees(np.arccos(np.clip(cos_diff, -1, 1)))
+                                        / params.max_orientation_diff_deg) ** 2
 
 
 def _propagate(left: Segments2D, right: Segments2D, li, rj, disparity, score, accept, params: StereoParams):

@@ -209,15 +209,16 @@ def test_extract_writes_one_line_per_frame(small_recording, tmp_path):
 
 
 def _board_counts(tmp_path, flags, keys):
-    """Per flag: the sums over the chessboard's first two frames of ``accum extract``'s counts ``keys``."""
+    """Per flag (None: none): the sums over the chessboard's first two frames of ``accum extract``'s
+    counts ``keys``."""
     import json
     from pathlib import Path
 
     board = Path(__file__).resolve().parent.parent / "sample_data" / "chessboard" / "chessboard.mcap"
     counts = {}
     for flag in flags:
-        out = tmp_path / f"frames{flag}.jsonl"
-        assert run("extract", str(board), "-o", out, "--frames", "0:2", flag).exit_code == 0
+        out = tmp_path / f"frames{flag or ''}.jsonl"
+        assert run("extract", str(board), "-o", out, "--frames", "0:2", *([flag] if flag else [])).exit_code == 0
         lines = [json.loads(line)["counts"] for line in out.read_text().splitlines()]
         counts[flag] = tuple(sum(c[key] for c in lines) for key in keys)
     return counts
@@ -229,11 +230,10 @@ def test_critical_ends_can_be_switched_off_for_the_papers_rule(tmp_path):
     assert counts["--critical-ends"][1] == counts["--no-critical-ends"][1] > 0
 
 
-def test_right_search_can_be_switched_off(tmp_path):
-    counts = _board_counts(tmp_path, ("--right-search", "--no-right-search"), ("segments", "unmatched"))
-    # the search matches pieces that matching left unmatched, and only those
-    added = counts["--right-search"][0] - counts["--no-right-search"][0]
-    assert added > 0 and counts["--no-right-search"][1] - counts["--right-search"][1] == added
+def test_right_search_is_off_by_default_and_can_be_switched_on(tmp_path):
+    counts = _board_counts(tmp_path, (None, "--right-search", "--no-right-search"), ("segments", "right_found"))
+    assert counts[None] == counts["--no-right-search"] and counts["--no-right-search"][1] == 0
+    assert counts["--right-search"][1] > 0 and counts["--right-search"][0] > counts["--no-right-search"][0]
 
 
 def test_accumulate_then_eval(small_recording, tmp_path):

@@ -53,8 +53,9 @@ def test_a_missed_right_edge_is_found_at_its_true_disparity():
     frame = _frame()
     left, right, right_gradients, params, m, side = _without_right_side(frame)
     assert len(side) >= 4 and not np.isin(side, m.left).any()     # the side is unmatched without the search
-    found, extended = guided_matches(frame.left, frame.right, left, right, m, right_gradients, INTRINSICS,
-                                     params.stereo, ON)
+    matches, extended = guided_matches(frame.left, frame.right, left, right, m, right_gradients, INTRINSICS,
+                                       params.stereo, ON)
+    found = matches
     new = np.isin(found.left, side)
     assert new.sum() >= len(side) - 1
     truth = INTRINSICS.fx * INTRINSICS.baseline / DEPTH
@@ -66,6 +67,11 @@ def test_a_missed_right_edge_is_found_at_its_true_disparity():
     assert np.array_equal(found.left[:len(m.left)], m.left) and np.array_equal(found.right[:len(m.right)], m.right)
     assert len(np.unique(extended.line_id[found.right[new]])) == new.sum()
     assert found.unmatched == m.unmatched - new.sum()
+    # the new matches name the appended pieces, which lie on the side in the right image
+    assert np.array_equal(found.right[len(m.right):], len(right) + np.arange(new.sum()))
+    assert np.array_equal(extended.centers[:len(right)], right.centers)
+    appended = extended.centers[len(right):, 0]
+    assert np.abs(appended - (_column(RIGHT_SIDE_X) - truth)).max() < 0.5
 
 
 def test_a_piece_is_left_alone_where_a_second_edge_of_its_polarity_lies_beside_the_first():
@@ -97,13 +103,33 @@ def test_no_search_without_matched_neighbours_or_when_disabled():
                           off)[0] is m
 
 
-def test_extraction_triangulates_the_found_pieces_on_the_edge():
+def test_extraction_triangulates_the_found_pieces_on_the_edge(monkeypatch):
+    """Through ``extract_frame``, with the right image's detector blind to the rectangle's right side:
+    the search finds that side, and its pieces are triangulated on it."""
+    import accumcli.extract as extract_module
+
     frame = _frame(seed=3)
+    params = ExtractParams()
+    detect = extract_module.DETECTORS[params.lines.detector]
+    disparity = INTRINSICS.fx * INTRINSICS.baseline / DEPTH
+
+    def blind(image, *args):
+        pieces = detect(image, *args)
+        if image is frame.right:
+            return pieces.select(np.abs(pieces.centers[:, 0] - (_column(RIGHT_SIDE_X) - disparity)) >= 2)
+        return pieces
+
+    monkeypatch.setitem(extract_module.DETECTORS, params.lines.detector, blind)
+    without = extract_frame(frame, params)
     with_search = extract_frame(frame, ExtractParams(guided=ON))
-    without = extract_frame(frame, ExtractParams())     # off by default
-    assert len(with_search.segments) >= len(without.segments)
+    assert without.counts["right_found"] == 0 and with_search.counts["right_found"] >= 4
+
+    def on_side(segments):
+        return (np.abs(segments.centers[:, 0] - RIGHT_SIDE_X) < 0.005) & (np.abs(segments.centers[:, 1]) < 0.05)
+
+    assert on_side(without.segments).sum() == 0
     seg = with_search.segments
-    on = (np.abs(seg.centers[:, 0] - RIGHT_SIDE_X) < 0.005) & (np.abs(seg.centers[:, 1]) < 0.05)
+    on = on_side(seg)
     assert on.sum() >= 4
     assert np.abs(seg.centers[on, 2] - DEPTH).max() < 0.002
     # every 3D segment names a right piece that exists

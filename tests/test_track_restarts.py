@@ -8,7 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from accumcli.geometry import pose_error
+from scipy.spatial.transform import Rotation
+
+from accumcli.geometry import make_transform, pose_error
 from accumcli.model_io import read_truth
 from accumcli.runs import FrameRange, accumulate_recording, track_recording
 from accumcli.track import TrackParams
@@ -75,8 +77,10 @@ def test_the_frame_after_an_ambiguous_one_restarts(dev_steps_model, monkeypatch)
 
     def decide(candidates, params, unresolved=False):
         best = original_decide(candidates, params, unresolved)
-        if frames[-1] == 23 and best is not None and best.status == "tracked":
-            best.status, best.alternatives = "ambiguous", [(best.T_camera_object, best.coverage)]
+        if frames[-1] == 23 and best is not None and best.status == "tracked":   # a rival 4 degrees away
+            turned = best.T_camera_object @ make_transform(Rotation.from_euler("x", 4, degrees=True).as_matrix(),
+                                                           np.zeros(3))
+            best.status, best.alternatives = "ambiguous", [(turned, best.coverage)]
         return best
 
     original_update = track_module.PoseTracker.update
