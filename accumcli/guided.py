@@ -8,9 +8,10 @@ although half of them had one within 3 px; 3 to 5 % more had right pieces on the
 cover the left piece's rows.
 
 For each usable left piece left unmatched, the right image is searched along the piece's own rows
-(``ROWS`` of them), at the disparities of its matched neighbours in the left image (the range of the
-``NEIGHBOURS`` nearest within ``neighbour_px``, widened by ``margin_px``, searched only if at most
-``max_range_px`` wide: without a prior a row holds too many edges). A disparity gets a row's vote
+(``stereo.points_along``, where ``stereo._ncc`` samples it), at the disparities of its matched
+neighbours in the left image (the range of the ``NEIGHBOURS`` nearest within ``neighbour_px``,
+widened by ``margin_px``, searched only if at most ``max_range_px`` wide: without a prior a row holds
+too many edges). A disparity gets a row's vote
 where the right image has an edge of the piece's polarity there (a local maximum, within a pixel, of
 the gradient across the piece, of at least ``min_contrast`` of the piece's own): the best disparity
 needs ``min_rows`` votes and every disparity ``min_gap_px`` or more away at most ``max_rival_rows``
@@ -49,9 +50,9 @@ from scipy.spatial import cKDTree
 
 from .lines2d import Gradients, Segments2D, dot2, parabola_peak, sample
 from .recording import StereoIntrinsics
-from .stereo import Matches, StereoParams, _ncc, angle_from_rows, orientation_penalty
+from .stereo import (Matches, StereoParams, _ncc, angle_from_rows, orientation_close, orientation_penalty,
+                     points_along)
 
-ROWS = 8              # sample rows along a piece, as ``stereo._ncc`` samples it
 NEIGHBOURS = 8        # matched pieces looked at for a piece's disparity prior
 REFERENCE_PAIRS = 64  # of the frame's matches, scored again with the found pieces
 
@@ -62,7 +63,7 @@ class GuidedParams:
     neighbour_px: float = 40.0   # matched left pieces this near (the ``NEIGHBOURS`` nearest) give the prior ...
     margin_px: float = 3.0       # ... their disparities' range widened by this ...
     max_range_px: float = 48.0   # ... and searched only if at most this wide
-    min_rows: int = 7            # of ``ROWS``: rows that must show the right edge at the best disparity ...
+    min_rows: int = 7            # rows (of ``stereo.SAMPLES_ALONG``) showing the right edge at the best disparity ...
     max_rival_rows: int = 3      # ... and at most this many at any disparity ``min_gap_px`` or more away
     min_gap_px: float = 3.0
     min_contrast: float = 0.5    # a right edge point's gradient, against the left piece's contrast
@@ -98,8 +99,7 @@ def guided_matches(left_img: np.ndarray, right_img: np.ndarray, left: Segments2D
     # the left centre's row crosses each found right piece at its centre (``_locate``)
     disparity = left.centers[pieces_left, 0] - found.centers[:, 0]
     cos_diff = np.abs(dot2(left.directions[pieces_left], found.directions))
-    plausible = ((disparity >= d_min) & (disparity <= d_max)
-                 & (cos_diff >= np.cos(np.radians(stereo.max_orientation_diff_deg))))
+    plausible = (disparity >= d_min) & (disparity <= d_max) & orientation_close(cos_diff, stereo)
     pieces_left, found, disparity, cos_diff = (pieces_left[plausible], found.select(plausible), disparity[plausible],
                                                cos_diff[plausible])
     if len(pieces_left) == 0:
@@ -149,7 +149,7 @@ def _vote(right_gradients: Gradients, left: Segments2D, todo, lo, hi, params: Gu
     local maximum (within a pixel) of the gradient across the piece, of the piece's polarity and at
     least ``min_contrast`` of its contrast (``Segments2D.contrast``, grey levels per px)."""
     width = int((hi - lo).max()) + 1
-    rows, u_left = _rows(left, todo)
+    rows, u_left = points_along(left, todo)
     d = lo[:, None] + np.arange(width)                                                   # (T, W)
     response = _response(right_gradients, left, todo, u_left[:, :, None] - d[:, None, :], rows)   # (T, R, W)
     inside = (d <= hi[:, None])[:, None, :]
@@ -173,7 +173,7 @@ def _locate(gradients: Gradients, left: Segments2D, todo, d, params: GuidedParam
     """(T) right pieces (right image, px; line ids 0, ``t`` 0) through the right edge located on each
     left piece's rows within ``locate_px`` of disparity ``d`` (T,) px, and (T,) whether ``min_rows``
     rows found it, within ``max_residual_px`` RMS of a straight line."""
-    rows, u_left = _rows(left, todo)
+    rows, u_left = points_along(left, todo)
     u0 = u_left - d[:, None]
     offsets = np.arange(-params.locate_px, params.locate_px + 0.5)                      # (O,)
     response = _response(gradients, left, todo, u0[:, :, None] + offsets, rows)         # (T, R, O)
@@ -200,17 +200,9 @@ def _locate(gradients: Gradients, left: Segments2D, todo, d, params: GuidedParam
     return pieces, found
 
 
-def _rows(left: Segments2D, todo) -> tuple[np.ndarray, np.ndarray]:
-    """(T, ROWS) rows and (T, ROWS) columns (left image, px) of points along the left pieces ``todo``,
-    as ``stereo._ncc`` places them."""
-    s = np.linspace(-0.4, 0.4, ROWS)[None, :] * left.lengths[todo][:, None]
-    return (left.centers[todo, 1][:, None] + s * left.directions[todo, 1][:, None],
-            left.centers[todo, 0][:, None] + s * left.directions[todo, 0][:, None])
-
-
 def _response(gradients: Gradients, left: Segments2D, todo, u: np.ndarray, rows: np.ndarray) -> np.ndarray:
     """(T, R, K) the right image's gradient (grey levels per px) across the left pieces ``todo`` (along
     their normal, signed by their polarity) at columns ``u`` (T, R, K) on ``rows`` (T, R), right image px."""
     v = np.broadcast_to(rows[:, :, None], u.shape)
-    normal = np.column_stack([-left.directions[todo, 1], left.directions[todo, 0]]) * left.polarity[todo, None]
+    normal = left.normals[todo] * left.polarity[todo, None]
     return sample(gradients.gx, u, v) * normal[:, None, None, 0] + sample(gradients.gy, u, v) * normal[:, None, None, 1]

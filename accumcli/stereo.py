@@ -192,7 +192,7 @@ def match(left_img: np.ndarray, right_img: np.ndarray, left: Segments2D, right: 
     grad_r = right.normals[rj] * right.polarity[rj, None]
     ok = ((np.abs(v - right.centers[rj, 1]) <= half_height) & (disparity >= d_min) & (disparity <= d_max)
           & (dot2(grad_l, grad_r) > 0)
-          & (cos_diff >= np.cos(np.radians(params.max_orientation_diff_deg))))
+          & orientation_close(cos_diff, params))
     li, rj, disparity, cos_diff = li[ok], rj[ok], disparity[ok], cos_diff[ok]
     if len(li) == 0:
         return empty
@@ -221,6 +221,11 @@ def match(left_img: np.ndarray, right_img: np.ndarray, left: Segments2D, right: 
     accept |= _propagate(left, right, li, rj, disparity, score, accept, params)
     k = np.flatnonzero(accept)
     return Matches(li[k], rj[k], disparity[k], score[k], int(critical_l.sum()), len(usable_l) - len(k))
+
+
+def orientation_close(cos_diff: np.ndarray, params: StereoParams) -> np.ndarray:
+    """(P,) bool: pairs whose image lines (``cos_diff``, (P,) |cos|) are within ``max_orientation_diff_deg``."""
+    return cos_diff >= np.cos(np.radians(params.max_orientation_diff_deg))
 
 
 def orientation_penalty(cos_diff: np.ndarray, params: StereoParams) -> np.ndarray:
@@ -290,16 +295,24 @@ def _correlation(a: np.ndarray, b: np.ndarray):
     return ncc, mean_a, mean_b, energy_a, energy_b
 
 
+SAMPLES_ALONG = 8   # points along a segment where its patch is sampled (``_ncc``)
+
+
+def points_along(segments: Segments2D, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(P, SAMPLES_ALONG) rows and (P, SAMPLES_ALONG) columns (px, the segments' image) of points
+    spread over the middle 80 % of segments ``index`` (P,)."""
+    s = np.linspace(-0.4, 0.4, SAMPLES_ALONG)[None, :] * segments.lengths[index][:, None]
+    return (segments.centers[index, 1][:, None] + s * segments.directions[index, 1][:, None],
+            segments.centers[index, 0][:, None] + s * segments.directions[index, 0][:, None])
+
+
 def _ncc(left_img, right_img, left: Segments2D, right: Segments2D, li, rj, params: StereoParams) -> np.ndarray:
     """Photometric score (P,) of patches along matched segments: the better of the
     whole patch's score and a one-sided score. At an occluding edge only the
     occluder's side looks the same in both views; the one-sided score compares
     the mean brightness of one side (the step itself excluded) and is capped at
     ``side_score``, below what a good whole-patch match reaches."""
-    n_along = 8
-    s = np.linspace(-0.4, 0.4, n_along)[None, :] * left.lengths[li][:, None]          # (P, S)
-    rows = left.centers[li, 1][:, None] + s * left.directions[li, 1][:, None]
-    u_left = left.centers[li, 0][:, None] + s * left.directions[li, 0][:, None]
+    rows, u_left = points_along(left, li)                                             # (P, S)
     u_right = _row_crossing(right, rj[:, None], rows)
     w = params.patch_half_width_px
     h = np.arange(-w, w + 1, dtype=float)
