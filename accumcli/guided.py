@@ -26,12 +26,13 @@ plane, to accumulation. Searching by patch score (NCC) instead found half as man
 devset 1 in 7 of those wrong against 1 in 10 by votes.
 
 Off by default (``--right-search`` switches it on). Measured with it against without, ``make
-suite``: completeness median 0.624 -> 0.636, worst row 0.271 -> 0.293 (higher on 15 of 19 rows; the
-same gain, 0.617 -> 0.626 and 0.245 -> 0.271, with every image read shifted by 0.004 px: the
-scoreboard's noise), single-frame correct 3D higher on every row (median 0.418 -> 0.431); the costs:
+suite``: completeness median 0.624 -> 0.636, worst row 0.271 -> 0.273 (higher on 14 of 19 rows, lower
+on the teabox, 0.665 -> 0.653, and sim_100; before its pairs had to pass matching's orientation
+test, 0.293, and with every image read shifted by 0.004 px, the scoreboard's noise, 0.617 -> 0.626
+and 0.245 -> 0.271), single-frame correct 3D higher on every row (median 0.418 -> 0.430); the costs:
 the single-frame near-object precision median 0.753 -> 0.737 (its pieces' directions are a lone
-piece's), precision rows under 0.95 2 -> 4 (within the rows' noise of about 0.03), extraction about
-2 ms a frame. What keeps it off is tracking with its models: over four runs of the tracking
+piece's), precision rows under 0.95 3 -> 5 (the teabox's included; within the rows' noise of about
+0.03), extraction about 2 ms a frame. What keeps it off is tracking with its models: over four runs of the tracking
 scoreboard with image reads shifted by 0, +-0.004 and 0.008 px, sim_206 turns to an aspect its
 model barely covers (3 to 5 % of it in view) and frames there were tracked 3.2 to 5.4 deg off in
 every run (without the search: one false frame in the four runs, dev_steps at 0.008 px); a floor of
