@@ -203,14 +203,14 @@ def _dash_is_stdout(ctx, param, value):
 _OUTPUT_PATH = dict(type=click.Path(dir_okay=False, allow_dash=True), callback=_dash_is_stdout)   # a file, or -
 
 
-def _check_formats(outputs, suffixes: tuple) -> None:
-    """Each output names its format by one of ``suffixes`` (the library's check, as an option's error)."""
+def _check_formats(outputs, suffixes: tuple, option: str = "--output") -> None:
+    """Each output names its format by one of ``suffixes`` (the library's check, as ``option``'s error)."""
     from .runs.base import check_output_kinds
 
     try:
         check_output_kinds(outputs, suffixes)
     except InputError as e:
-        raise click.BadParameter(str(e), param_hint="--output") from None
+        raise click.BadParameter(str(e), param_hint=option) from None
 
 
 output_option = functools.partial(click.option, "-o", "--output", **_OUTPUT_PATH)
@@ -362,6 +362,10 @@ def extract(recording, output, rrd, with_2d, workers, frames, extract_params, op
                    "passes over the recording (frame-to-frame refinement on the images, fused with the "
                    "recorded poses, then refined on the model they give; the extraction runs once; "
                    "the whole 1.4 to 3 times the time, the progress bar counts every pass).")
+@click.option("--poses", "poses", multiple=True, metavar="FILE", **_OUTPUT_PATH,
+              help="With --motion tracked, also write the repaired poses, as track does: .json (every frame, "
+                   "its status: tracked = verified on the model, linked = by its neighbours' images, recorded "
+                   "= its /tf; and its correction of the /tf), .tum and/or .mcap (the tracked ones); repeatable.")
 @click.option("--sp", "position_threshold", type=click.FloatRange(0.1, 50.0), default=3.0, show_default=True,
               metavar="MM",
               help="s_p of the paper's metric (association and merging), millimetres.")
@@ -377,7 +381,7 @@ def extract(recording, output, rrd, with_2d, workers, frames, extract_params, op
 @frames_option
 @extraction_options
 @recording_options
-def accumulate(recording, outputs, ply_all, rrd, truth, history, plot, png, panel, motion, position_threshold,
+def accumulate(recording, outputs, ply_all, rrd, truth, history, plot, png, panel, motion, poses, position_threshold,
                angle_threshold, view_planes, box, workers, frames, extract_params, options):
     """Accumulate a model of the object over the recording, with the gripper's known motion.
 
@@ -391,15 +395,16 @@ def accumulate(recording, outputs, ply_all, rrd, truth, history, plot, png, pane
     from .pipeline import AccumulateParams
     from .report import accumulation_lines
     from .runs import accumulate_recording
-    from .runs.base import MODEL_OUTPUTS
+    from .runs.base import MODEL_OUTPUTS, POSES_OUTPUTS
 
     _check_formats(outputs, MODEL_OUTPUTS)
+    _check_formats(poses, POSES_OUTPUTS, "--poses")
     line_model = LineModelParams(thresholds=MetricThresholds(position_threshold / 1000.0, angle_threshold),
                                  view_planes=view_planes)
     params = AccumulateParams(extract=extract_params, line_model=line_model, motion=motion, box=box)
     result = run_with_progress("accumulating", accumulate_recording, recording, outputs, params=params,
                                options=options, frames=frames, truth=truth, history=history, plot=plot, rrd=rrd,
-                               png=png, panel=panel, ply_all=ply_all, workers=workers)
+                               png=png, panel=panel, ply_all=ply_all, poses=poses, workers=workers)
     _report(accumulation_lines(result, motion))
     _wrote(result.outputs)
 

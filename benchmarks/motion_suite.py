@@ -6,8 +6,9 @@ Rows: random simulated scenes (``scene="random"``, seeds 301-312, 24 frames), ea
 exact and with ``pose_noise`` 1.5 deg / 4 mm. Per row the precision / completeness (against the exact
 recording's truth) of: the exact recording accumulated with its poses, the noisy one with its
 poses (``gripper``), the noisy one with ``--motion tracked``; the larger of tracked's two shortfalls
-from exact (the target is at most 0.02), and the seconds of the tracked and the gripper runs. Then
-the median and the worst row. Not part of ``make suite`` (a few minutes): ``make motion``.
+from exact (the target is at most 0.02), the median pose errors over the frames of the recorded and
+of the repaired poses (``accumulate --poses``) and the share of these verified on the model
+('tracked'), and the seconds of the tracked and the gripper runs. Then the median and the worst row. Not part of ``make suite`` (a few minutes): ``make motion``.
 
 What a shortfall means, per row: two reference recordings of the same scene with the same images,
 their poses perturbed per frame (``PERTURBED``) and accumulated with them, give the shortfall of
@@ -26,7 +27,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import recording  # noqa: E402
+from common import CACHE, recording  # noqa: E402
 
 SEEDS = tuple(range(301, 313))   # 307-312 added after the choices in motion.py were made on 301-306
 NOISE = dict(pose_noise_deg=1.5, pose_noise_m=0.004)
@@ -48,27 +49,53 @@ def score(seed: int) -> dict:
     out = {}
     for name, path, motion in runs:
         t0 = time.perf_counter()
-        model = accumulate_recording(path, params=AccumulateParams(motion=motion)).model
+        poses = str(CACHE / f"motion_repaired_{seed}.poses.json") if motion == "tracked" else ()
+        model = accumulate_recording(path, params=AccumulateParams(motion=motion), poses=poses).model
         out[f"{name}_s"] = time.perf_counter() - t0
         e = evaluate_model(model, truth)
         out[name] = (e["precision"], e["completeness"])
+    out["pose_errors"] = pose_errors(noisy, CACHE / f"motion_repaired_{seed}.poses.json", truth)
     for name in ("tracked", *PERTURBED):
         out[f"{name}_shortfall"] = max(out["exact"][0] - out[name][0], out["exact"][1] - out[name][1])
     return out
 
 
+def pose_errors(noisy: str, repaired, truth) -> tuple[float, float, float, float, float]:
+    """Median rotation (deg) and translation (mm) errors of the recorded and of the repaired poses
+    (``accumulate --poses``) against the truth over all frames, and the repaired poses' share of
+    'tracked' (verified on the model)."""
+    import numpy as np
+
+    from accumcli.geometry import pose_error
+    from accumcli.model_io import read_poses
+    from accumcli.recording import Recording
+
+    with Recording(noisy) as rec:
+        recorded = {f.timestamp_ns: f.T_camera_object for f in rec.frames()}
+    track = read_poses(repaired)
+    true = {int(t): T for t, T in zip(truth.times_ns, truth.poses)}
+    errors = np.array([(*pose_error(recorded[int(t)], true[int(t)]), *pose_error(T, true[int(t)]))
+                       for t, T in zip(track.times_ns, track.poses)])
+    return (*np.median(errors[:, :2], axis=0) * [1, 1000], *np.median(errors[:, 2:], axis=0) * [1, 1000],
+            float(track.tracked().mean()))
+
+
 def main() -> int:
     rows = {seed: score(seed) for seed in SEEDS}
     short = ("tracked", *PERTURBED)
-    print("| seed | exact | noisy | tracked | shortfall | floor shortfall | good shortfall | tracked s | gripper s |\n"
-          "|---|---|---|---|---|---|---|---|---|")
+    print("| seed | exact | noisy | tracked | shortfall | floor shortfall | good shortfall | recorded deg / mm "
+          "| repaired deg / mm | verified | tracked s | gripper s |\n|---|---|---|---|---|---|---|---|---|---|---|---|")
     for seed, r in rows.items():
         cells = [f"{r[k][0]:.3f} / {r[k][1]:.3f}" for k in ("exact", "noisy", "tracked")]
         cells += [f"{r[f'{k}_shortfall']:.3f}" for k in short]
+        e = r["pose_errors"]
+        cells += [f"{e[0]:.2f} / {e[1]:.2f}", f"{e[2]:.2f} / {e[3]:.2f}", f"{e[4]:.2f}"]
         print(f"| {seed} | " + " | ".join(cells) + f" | {r['tracked_s']:.1f} | {r['noisy_s']:.1f} |")
     for label, pick in (("median", statistics.median), ("worst", max)):
-        print(f"| **{label}** | | | | " + " | ".join(f"{pick(r[f'{k}_shortfall'] for r in rows.values()):.3f}"
-                                                 for k in short) + " | | |")
+        cells = [f"{pick(r[f'{k}_shortfall'] for r in rows.values()):.3f}" for k in short]
+        cells += [" / ".join(f"{pick(r['pose_errors'][i] for r in rows.values()):.2f}" for i in pair)
+                  for pair in ((0, 1), (2, 3))]
+        print(f"| **{label}** | | | | " + " | ".join(cells) + " | | | |")
     print()
     for k in short:
         within = sum(r[f"{k}_shortfall"] <= 0.02 for r in rows.values())

@@ -18,7 +18,8 @@ from ..errors import AccumError, InputError
 from ..evaluate import EdgeSamples, score_segments
 from ..lines2d import StageTimes
 from ..logs import LimitedWarnings
-from ..model_io import read_truth, write_json_lines, write_model, write_ply
+from ..geometry import pose_error
+from ..model_io import POSES_TOPIC, PoseTrack, read_truth, write_json_lines, write_model, write_ply
 from ..motion import MotionParams, corrected, frame_to_frame, fuse, object_segments, on_model
 from ..outputs import OutputSet
 from ..pipeline import AccumulateParams, LineAccumulation
@@ -26,8 +27,8 @@ from ..row_check import RowCheck
 from ..motion_check import MotionCheck
 from ..segments import Segments
 from ..surface import faces_of
-from .base import (MODEL_OUTPUTS, FrameRange, Progress, RecordingOptions, check_output_kinds, frame_range, in_frames,
-                   no_progress, nothing_done, path_list)
+from .base import (MODEL_OUTPUTS, POSES_OUTPUTS, FrameRange, Progress, RecordingOptions, check_output_kinds,
+                   frame_range, in_frames, no_progress, nothing_done, path_list, write_pose_outputs)
 from .checks import check_same_time, check_truth_matches, check_truth_poses
 from .frame_logs import rerun_log, scene_log
 from .parallel import extracted_frames, resolve_workers
@@ -71,7 +72,7 @@ class AccumulationResult:
 def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = AccumulateParams(),
                          options: RecordingOptions = RecordingOptions(), frames: FrameRange = FrameRange(),
                          truth=None, history=None, plot=None, rrd=None, png=None, panel=None,
-                         ply_all: bool = False,
+                         ply_all: bool = False, poses=(),
                          workers: int | None = 1, progress: Progress = no_progress) -> AccumulationResult:
     """Accumulate the frames in ``frames`` of ``recording`` into one model.
 
@@ -80,7 +81,9 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
     frame, and its counts, ``foxglove_scene``); truth: a truth sidecar path, to score the model
     frame by frame; history: JSON lines, one row per frame; plot: a PNG of those rows over the
     frames (``plots``); rrd: a Rerun recording; png / panel: pictures of the model and of the last
-    frame. All outputs are checked before the work and written together at the end. workers: processes
+    frame; poses (``motion='tracked'`` only): the repaired poses T_camera_object, as ``accum track``
+    writes them (``POSES_OUTPUTS``), each with its status (``REPAIR_STATUS``) and its correction of the
+    recorded pose (``correction_deg``, ``correction_mm``): a robot's /tf checked on the images. All outputs are checked before the work and written together at the end. workers: processes
     extracting the next frames while this one accumulates (``runs.parallel``; the same model bytes
     whatever the number; None: ``parallel.resolve_workers``; more than 1 starts them from a fork
     server, which imports the caller's main module: guard a script's entry point with
@@ -89,11 +92,15 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
     progress: ``Progress``. Raises ``AccumError`` (``InputError`` for bad arguments,
     ``RecordingError`` for a recording that cannot be used).
     """
-    outputs, frames = path_list(outputs, "outputs"), frame_range(frames)
+    outputs, frames, poses = path_list(outputs, "outputs"), frame_range(frames), path_list(poses, "poses")
     check_output_kinds(outputs, MODEL_OUTPUTS)
+    check_output_kinds(poses, POSES_OUTPUTS)
+    if poses and params.motion != "tracked":
+        raise InputError("the poses output holds the poses that --motion tracked repairs: add --motion tracked "
+                         "(with the recorded poses, the recording's /tf is what it holds)")
     if ply_all and not any(str(path).lower().endswith(".ply") for path in outputs):
         raise InputError("--all chooses what a .ply output holds, and no .ply output is given")
-    files = OutputSet([*outputs, history, plot, rrd, png, panel], inputs=[recording, truth])
+    files = OutputSet([*outputs, *poses, history, plot, rrd, png, panel], inputs=[recording, truth])
     edges = None
     if truth is not None:
         truth_doc = read_truth(truth)
@@ -133,11 +140,12 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
                     continue
                 yield frame
 
-        poses, store = None, None
+        repaired, store, repair_rows = None, None, []
         if params.motion == "tracked":
             with_pose = (lambda: (f for f in counted_frames() if f.T_camera_object is not None))
             store = ExtractionStore()
-            poses = tracked_poses(with_pose, params, rec.object_frame, rec.camera_frame, workers, acc.times, store)
+            repaired, repair_status = tracked_poses(with_pose, params, rec.object_frame, rec.camera_frame, workers,
+                                                    acc.times, store)
         # closing: an interrupt must end the extraction helpers here, not when the generator is collected
         with rerun_log(files, rrd, "accumulate") as viz, scene_log(files, outputs) as scenes, \
                 LimitedWarnings(log) as no_pose, \
@@ -145,7 +153,10 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
                     frames_with_pose(), params.extract, rec.camera_frame, workers, acc.times)) as extractions:
             for frame, extraction in extractions:
                 step = acc.step(frame, frame.T_camera_object, extraction,
-                                T_corrected=None if poses is None else poses[frame.index])
+                                T_corrected=None if repaired is None else repaired[frame.index])
+                if repaired is not None:
+                    repair_rows.append((frame.timestamp_ns, repaired[frame.index], repair_status[frame.index],
+                                        pose_correction(frame.T_camera_object, repaired[frame.index])))
                 rows.add(step.extraction, frame.intrinsics, frame.T_camera_object)
                 motion_check.add(step.extraction.segments, frame.T_camera_object, frame.timestamp_ns)   # the recorded motion
                 result.distances_m.append(float(np.linalg.norm(frame.T_camera_object[:3, 3])))
@@ -207,6 +218,11 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
             else:   # the times it was accumulated over: ``accum eval`` refuses a truth of other times
                 write_model(files.open(path), result.model,
                             source_times_ns=[result.rows[0]["timestamp_ns"], result.rows[-1]["timestamp_ns"]])
+        if poses:
+            times_ns, Ts, status, extra = zip(*repair_rows)
+            write_pose_outputs(files, poses, PoseTrack(rec.camera_frame, rec.object_frame, np.array(times_ns, np.int64),
+                                                       np.array(Ts), list(status), list(extra)),
+                               POSES_TOPIC, f"{rec.object_frame}_repaired")
         if history:
             write_json_lines(files.open(history), result.rows)
         if plot:
@@ -222,7 +238,7 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
                 write_png(files.open(panel, "wb"), render_frame_panel(step.frame, step.extraction, result.model,
                                                                 step.T_camera_object))
     result.seconds = time.perf_counter() - t0
-    result.outputs = [str(p) for p in (*outputs, history, plot, rrd, png, panel) if p]
+    result.outputs = [str(p) for p in (*outputs, *poses, history, plot, rrd, png, panel) if p]
     return result
 
 
@@ -274,6 +290,11 @@ def _nothing_accepted(result: AccumulationResult) -> str:
             f"they belong to these images (--object-frame, --camera-frame)")
 
 
+# how ``tracked_poses`` placed a frame (the status of ``accum accumulate --poses``): refined on the model of
+# the fused poses and verified there; by frame-to-frame refinements with its neighbours (fused with the
+# recorded poses) only; by neither, i.e. its recorded pose (in the gauge of the others)
+REPAIR_STATUS = ("tracked", "linked", "recorded")
+
 # ``tracked_poses``' four passes over the recording, then the accumulation itself: what a frame of each
 # costs, relative to the lightest (measured with workers=1: on the teabox 6.0, 3.1, 1.2, 2.6 and 1.3 s,
 # on sim_box 1.25, 0.81, 0.33, 0.50 and 0.40 s), for an ETA that holds from the first pass on: counted
@@ -282,9 +303,18 @@ TRACKED_PASS_COST = (4, 2, 1, 2, 1)
 TRACKED_PASSES = len(TRACKED_PASS_COST)
 
 
+def pose_correction(T_recorded: np.ndarray, T_repaired: np.ndarray) -> dict:
+    """How far a repaired pose moved the recorded one: ``correction_deg`` (the rotation's angle) and
+    ``correction_mm`` (the translation of the object frame's origin, camera frame)."""
+    angle_deg, translation_m = pose_error(T_repaired, T_recorded)
+    return {"correction_deg": round(angle_deg, 4), "correction_mm": round(translation_m * 1000, 4)}
+
+
 def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str, camera_frame: str, workers: int,
-                  times, store: ExtractionStore, motion: MotionParams = MotionParams()) -> dict[int, np.ndarray]:
-    """frame index -> the repaired T_camera_object (4, 4) of every frame ``frames_with_pose()`` yields
+                  times, store: ExtractionStore, motion: MotionParams = MotionParams()
+                  ) -> tuple[dict[int, np.ndarray], dict[int, str]]:
+    """frame index -> the repaired T_camera_object (4, 4) of every frame ``frames_with_pose()`` yields,
+    and frame index -> how the images placed it (``REPAIR_STATUS``)
     (called once per pass: the recording is streamed again; its extractions are recorded in ``store``
     by pass 1 and replayed after), by the passes of ``motion``: pass 1 accumulates with the recorded
     poses, pass 2 measures the frame-to-frame corrections against pass 1's accepted segments, ``fuse``
@@ -326,8 +356,10 @@ def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str,
         recorded.append((frame.index, frame.T_camera_object))
     x = fuse(links, len(recorded), motion)
     fused = {index: corrected(T, xk) for (index, T), xk in zip(recorded, x)}
+    linked = {k for link in links for k in link}
+    status = {index: "linked" if k in linked else "recorded" for k, (index, _) in enumerate(recorded)}
     if not motion.model_pass:
-        return fused
+        return fused, status
     model = accepted(store.replay(frames_with_pose()), lambda frame: fused[frame.index])
     measured = {}
     for k, (frame, extraction) in enumerate(store.replay(frames_with_pose())):
@@ -336,6 +368,7 @@ def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str,
         times.add("tracking", t0)
         if found is not None:
             measured[k] = (x[k] + found[0], found[1])   # T_recorded exp(x_k) exp(c) ~ T_recorded exp(x_k + c)
+            status[frame.index] = "tracked"
     x = fuse(links, len(recorded), motion, measured)
-    return {index: corrected(T, xk) for (index, T), xk in zip(recorded, x)}
+    return {index: corrected(T, xk) for (index, T), xk in zip(recorded, x)}, status
 

@@ -188,6 +188,22 @@ def check_output_kinds(outputs, suffixes: tuple[str, ...]) -> None:
             raise InputError(f"{expected}, found {found}{why}")
 
 
+def write_pose_outputs(files, outputs, track, topic: str, child_frame_id: str) -> None:
+    """``track`` (a ``model_io.PoseTrack``) to each of ``outputs`` (paths of ``POSES_OUTPUTS``, opened
+    by ``files``, an ``OutputSet``): .tum (its 'tracked' poses), .mcap (those as FrameTransforms on
+    ``topic``, to ``child_frame_id``) or .json (every pose with its status)."""
+    from ..model_io import write_poses, write_poses_mcap
+    from ..tum import write_poses_tum
+
+    for path in outputs:
+        if str(path).lower().endswith(".tum"):
+            write_poses_tum(files.open(path), track)
+        elif str(path).lower().endswith(".mcap"):
+            write_poses_mcap(files.open(path, "wb"), track, topic=topic, child_frame_id=child_frame_id)
+        else:
+            write_poses(files.open(path), track)
+
+
 def path_list(paths, what: str) -> list:
     """The paths of one path (a ``str`` or ``os.PathLike``: one path, not its characters) or of an
     iterable of them (None: none); ``InputError`` for anything else."""

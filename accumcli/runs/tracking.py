@@ -13,14 +13,13 @@ from ..errors import AccumError, InputError
 from ..extract import ExtractParams, extract_frame
 from ..geometry import check_transform
 from ..lines2d import frame_gradients
-from ..model_io import PoseTrack, checked_segments, read_model, write_poses, write_poses_mcap
+from ..model_io import PoseTrack, checked_segments, read_model
 from ..outputs import OutputSet
 from ..recording.tf_tree import frame_name
 from ..segments import Segments
 from ..track import PoseEstimate, PoseTracker, TrackParams
-from ..tum import write_poses_tum
 from .base import (POSES_OUTPUTS, FrameRange, Progress, RecordingOptions, check_output_kinds, frame_range, in_frames,
-                   no_progress, nothing_done, path_list)
+                   no_progress, nothing_done, path_list, write_pose_outputs)
 from .frame_logs import rerun_log
 
 log = logging.getLogger("accumcli")
@@ -153,14 +152,7 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
                         waited[-1][0], waited[0][1], start_index)
         track = PoseTrack(rec.camera_frame, rec.object_frame, np.array(times, np.int64),
                           np.array(poses).reshape(-1, 4, 4), status, extra)
-        for path in outputs:
-            if str(path).lower().endswith(".tum"):
-                write_poses_tum(files.open(path), track)
-            elif str(path).lower().endswith(".mcap"):
-                write_poses_mcap(files.open(path, "wb"), track, topic=poses_topic,
-                                 child_frame_id=poses_child_frame or f"{rec.object_frame}_tracked")
-            else:
-                write_poses(files.open(path), track)
+        write_pose_outputs(files, outputs, track, poses_topic, poses_child_frame or f"{rec.object_frame}_tracked")
         empty = [str(p) for p in outputs if str(p).lower().endswith((".tum", ".mcap"))]
         if empty and not track.tracked().any():
             log.warning("no frame tracked: %s hold%s no pose (poses.json says why each frame is lost)",
