@@ -13,7 +13,8 @@ from .accumulate import Accumulator, StepStats, UpdateRule
 from .errors import InputError
 from .extract import ExtractParams, FrameSegments, extract_frame
 from .geometry import inside_box, invert, mean_transform, pose_error, rotate_vectors, transform_points
-from .line_model import FrameContext, LineModelParams, LineSegmentType, direction_known, to_model
+from .line_model import (FrameContext, LineModelParams, LineSegmentType, direction_known, planes_from_image,
+                         to_model)
 from .lines2d import StageTimes
 from .recording import StereoFrame
 from .segments import Segments
@@ -143,6 +144,13 @@ class LineAccumulation:
             segments = segments.select(inside_box(transform_points(invert(T_camera_object), segments.centers),
                                                   np.asarray(self.params.box, float)))
         stats = self.core.update(segments, invert(T_camera_object), context)
+        rules = self.params.line_model
+        if rules.view_planes and rules.image_planes and len(self.core):
+            core = self.core   # its frame counter has moved on: this frame's confirmations say frame - 1
+            unsure = (core.log_odds >= 0) & (core.last_confirmed != core.frame - 1) & \
+                ~direction_known(core.entities, rules)
+            unused = np.setdiff1d(np.arange(len(extraction.left)), extraction.left_index)
+            planes_from_image(core.entities, unsure, extraction.left.select(unused), context, rules)
         # accepted as the model is written (``to_model``: a segment's direction must be sure too)
         stats.accepted = int(np.sum((self.core.log_odds >= 0) & direction_known(self.core.entities,
                                                                                 self.params.line_model)))

@@ -18,6 +18,7 @@ from accumcli.line_model import (
     LineModelParams,
     LineSegmentType,
     direction_known,
+    planes_from_image,
     sigmas,
     to_model,
 )
@@ -415,3 +416,44 @@ def test_disjoint_pairs_share_no_entity_on_either_side():
     assert sorted(chosen) == [1, 3] and len(set(ends)) == len(ends)
     # one pair listed in both orders at one cost (as _sharing lists them): chosen once, not never
     assert list(disjoint_pairs(np.array([0, 1]), np.array([1, 0]), np.array([0.1, 0.1]))) == [0]
+
+
+def _pieces(centers, directions, lengths):
+    """Left-image pieces (``Segments2D``) with the given centres (N, 2) px, directions (N, 2) and lengths (N,) px."""
+    from accumcli.lines2d import Segments2D
+
+    n = len(centers)
+    return Segments2D(np.asarray(centers, float), np.asarray(directions, float), np.asarray(lengths, float),
+                      np.ones(n, np.int8), np.full(n, 30.0), np.arange(n), np.zeros(n), np.asarray(directions, float))
+
+
+def test_planes_of_unmatched_pieces_from_another_aspect_pin_a_direction_stereo_tilted():
+    """A segment along y seen from the front, its stereo direction tilted 6 degrees in depth (within the
+    plane through the camera and the segment, which one view cannot check): a left piece along the true
+    edge in frames 20 and 22 degrees around it adds their planes, which cross the first one in the
+    true direction, and the second frame's view makes a second aspect (``to_model``'s one-aspect rule);
+    a piece 3 px beside the projection gives nothing."""
+    rules = LineModelParams()
+    kind = LineSegmentType(rules)
+    front = make_transform(np.eye(3), [0.0, 0.0, 0.5])
+    tilted = Rotation.from_rotvec([np.radians(6.0), 0.0, 0.0]).apply([0.0, 1.0, 0.0])   # towards the camera
+    model = kind.observe(_copy(_one_segment(tuple(tilted))), FrameContext(front, INTR))
+    model.confidence = np.array([0.9])
+
+    def off_y(segments):
+        return np.degrees(np.arccos(abs(segments.directions[0, 1])))
+
+    assert abs(off_y(model) - 6.0) < 0.1 and not direction_known(model, rules)[0]
+    half = 600.0 * 0.006 / 0.5   # the 12 mm edge along y at 0.5 m: 14.4 px, through the image centre
+    beside = _pieces([[INTR.cx + 3.0, INTR.cy]], [[0.0, 1.0]], [2 * half - 1])
+    side = make_transform(Rotation.from_rotvec([0.0, np.radians(20.0), 0.0]).as_matrix(), [0.0, 0.0, 0.5])
+    assert len(planes_from_image(model, np.array([True]), beside, FrameContext(side, INTR), rules)) == 0
+    assert abs(off_y(model) - 6.0) < 0.1 and model.extra["image_planes"][0] == 0
+    on_edge = _pieces([[INTR.cx, INTR.cy]], [[0.0, 1.0]], [2 * half - 1])
+    for turn, frames in ((20.0, 1), (22.0, 2)):
+        side = make_transform(Rotation.from_rotvec([0.0, np.radians(turn), 0.0]).as_matrix(), [0.0, 0.0, 0.5])
+        assert planes_from_image(model, np.array([True]), on_edge, FrameContext(side, INTR), rules).tolist() == [0]
+        assert model.extra["image_planes"][0] == frames
+        assert int(model.extra["views"][0].any(axis=1).sum()) == frames   # the first plane's view waits
+    assert off_y(model) < 1.5          # the planes cross in the edge; stereo (6 deg sigma) pulls a little
+    assert direction_known(model, rules)[0]
