@@ -500,7 +500,7 @@ def planes_from_image(model: Segments, candidates: np.ndarray, pieces: Segments2
     if not len(idx) or not len(pieces):
         return idx[:0]
     T, intr = context.T_camera_object, context.intrinsics
-    uv, _, z = intr.project(transform_points(T, model.endpoints()[idx].reshape(-1, 3)))
+    uv, _, z = intr.project(transform_points(T, model.select(idx).endpoints().reshape(-1, 3)))
     start, end = uv[0::2], uv[1::2]
     length = np.linalg.norm(end - start, axis=1)
     usable = (z[0::2] > 0) & (z[1::2] > 0) & np.isfinite(length) & (length >= 1.0)

@@ -149,7 +149,8 @@ class LineAccumulation:
             core = self.core   # its frame counter has moved on: this frame's confirmations say frame - 1
             unsure = (core.log_odds >= 0) & (core.last_confirmed != core.frame - 1) & \
                 ~direction_known(core.entities, rules)
-            unused = np.setdiff1d(np.arange(len(extraction.left)), extraction.left_index)
+            unused = np.ones(len(extraction.left), bool)
+            unused[extraction.left_index] = False
             planes_from_image(core.entities, unsure, extraction.left.select(unused), context, rules)
         # accepted as the model is written (``to_model``: a segment's direction must be sure too)
         stats.accepted = int(np.sum((self.core.log_odds >= 0) & direction_known(self.core.entities,
