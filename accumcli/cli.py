@@ -363,9 +363,10 @@ def extract(recording, output, rrd, with_2d, workers, frames, extract_params, op
                    "recorded poses, then refined on the model they give; the extraction runs once; "
                    "the whole 1.4 to 3 times the time, the progress bar counts every pass).")
 @click.option("--poses", "poses", multiple=True, metavar="FILE", **_OUTPUT_PATH,
-              help="With --motion tracked, also write the repaired poses, as track does: .json (every frame, "
-                   "its status: tracked = verified on the model, linked = by its neighbours' images, recorded "
-                   "= its /tf; and its correction of the /tf), .tum and/or .mcap (the tracked ones); repeatable.")
+              help="With --motion tracked, also write the repaired poses, as track does: .json (every frame "
+                   "with a pose, its status: tracked = verified on the model, linked = measured on its "
+                   "neighbours' images only, recorded = its /tf; and its correction of the /tf), .tum and/or "
+                   ".mcap (the tracked ones); repeatable.")
 @click.option("--sp", "position_threshold", type=click.FloatRange(0.1, 50.0), default=3.0, show_default=True,
               metavar="MM",
               help="s_p of the paper's metric (association and merging), millimetres.")

@@ -479,9 +479,10 @@ def planes_from_image(model: Segments, candidates: np.ndarray, pieces: Segments2
     ``image_plane_gate_px`` across it and ``image_plane_gate_deg`` of its angle, the piece within its
     extent (the nearest such piece). The plane through the camera and the piece is added to the
     segment's ``dir_info`` with the weight of a 3D observation of confidence ``image_plane_weight``,
-    the direction is the planes' intersection again and its sigma what they pin; once
-    ``image_plane_min_frames`` frames gave a segment such planes, their views count as aspects
-    (``views``: the one-aspect rule of ``to_model``). Returns the indices of the segments that took a plane.
+    the direction is the planes' intersection again and its sigma what they pin; from the
+    ``image_plane_min_frames``-th frame that gave a segment such a plane on, that frame's view is
+    added to its aspects (``views``: the one-aspect rule of ``to_model``, and ``expected``). Needs
+    ``view_planes`` (``dir_info``). Returns the indices of the segments that took a plane.
 
     Why: a piece that stereo left unmatched (no right piece, an ambiguous one, a polarity flip) still
     fixes the plane its edge lies in, and a plane from another aspect is what a segment seen from one
@@ -508,7 +509,7 @@ def planes_from_image(model: Segments, candidates: np.ndarray, pieces: Segments2
     if not len(idx):
         return idx
     middle, direction = (start + end) / 2, (end - start) / length[:, None]
-    radius = (length.max() + pieces.lengths.max()) / 2
+    radius = length.max() / 2 + IMAGE_PLANE_END_SLACK_PX + p.image_plane_gate_px   # the farthest centre that passes
     pairs = cKDTree(middle).sparse_distance_matrix(cKDTree(pieces.centers), radius, output_type="ndarray")
     i, j = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
     rel = pieces.centers[j] - middle[i]

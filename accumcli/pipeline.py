@@ -187,13 +187,19 @@ class LineAccumulation:
         self.T_recorded_model.append(invert(T_recorded) @ estimate.T_camera_object)
         return estimate.T_camera_object, estimate
 
+    def T_object_model(self) -> np.ndarray:
+        """(4, 4) the model's frame in the object frame: the mean offset of the refined frames (with
+        tracked motion; the identity without; see the class docstring). A pose T_camera_model used to
+        accumulate is ``T_camera_model @ invert(T_object_model())`` in the object frame of ``model()``."""
+        return mean_transform(np.stack(self.T_recorded_model)) if self.T_recorded_model else np.eye(4)
+
     def model(self) -> Segments:
         """The current model: every live segment with its confidence and observation count (with
         tracked motion, moved into the object frame by the mean offset; see the class docstring)."""
         model = self._written()
         if not self.T_recorded_model:
             return model
-        T_object_model = mean_transform(np.stack(self.T_recorded_model))
+        T_object_model = self.T_object_model()
         moved = model.transformed(T_object_model, model.frame_id)
         moved.extra = {**model.extra, "view_direction": rotate_vectors(T_object_model, model.extra["view_direction"])}
         return moved

@@ -8,7 +8,8 @@ recording's truth) of: the exact recording accumulated with its poses, the noisy
 poses (``gripper``), the noisy one with ``--motion tracked``; the larger of tracked's two shortfalls
 from exact (the target is at most 0.02), the median pose errors over the frames of the recorded and
 of the repaired poses (``accumulate --poses``) and the share of these verified on the model
-('tracked'), and the seconds of the tracked and the gripper runs. Then the median and the worst row. Not part of ``make suite`` (a few minutes): ``make motion``.
+('tracked'), and the seconds of the tracked and the gripper runs. Then the median and the worst row.
+Not part of ``make suite`` (a few minutes): ``make motion``.
 
 What a shortfall means, per row: two reference recordings of the same scene with the same images,
 their poses perturbed per frame (``PERTURBED``) and accumulated with them, give the shortfall of

@@ -432,7 +432,7 @@ def test_planes_of_unmatched_pieces_from_another_aspect_pin_a_direction_stereo_t
     plane through the camera and the segment, which one view cannot check): a left piece along the true
     edge in frames 20 and 22 degrees around it adds their planes, which cross the first one in the
     true direction, and the second frame's view makes a second aspect (``to_model``'s one-aspect rule);
-    a piece 3 px beside the projection gives nothing."""
+    a piece 2 px beside the projection gives nothing."""
     rules = LineModelParams()
     kind = LineSegmentType(rules)
     front = make_transform(np.eye(3), [0.0, 0.0, 0.5])
@@ -445,7 +445,7 @@ def test_planes_of_unmatched_pieces_from_another_aspect_pin_a_direction_stereo_t
 
     assert abs(off_y(model) - 6.0) < 0.1 and not direction_known(model, rules)[0]
     half = 600.0 * 0.006 / 0.5   # the 12 mm edge along y at 0.5 m: 14.4 px, through the image centre
-    beside = _pieces([[INTR.cx + 3.0, INTR.cy]], [[0.0, 1.0]], [2 * half - 1])
+    beside = _pieces([[INTR.cx + 2.0, INTR.cy]], [[0.0, 1.0]], [2 * half - 1])   # the gate: 1.5 px
     side = make_transform(Rotation.from_rotvec([0.0, np.radians(20.0), 0.0]).as_matrix(), [0.0, 0.0, 0.5])
     assert len(planes_from_image(model, np.array([True]), beside, FrameContext(side, INTR), rules)) == 0
     assert abs(off_y(model) - 6.0) < 0.1 and model.extra["image_planes"][0] == 0

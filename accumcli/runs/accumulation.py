@@ -18,7 +18,7 @@ from ..errors import AccumError, InputError
 from ..evaluate import EdgeSamples, score_segments
 from ..lines2d import StageTimes
 from ..logs import LimitedWarnings
-from ..geometry import pose_error
+from ..geometry import invert, pose_error
 from ..model_io import POSES_TOPIC, PoseTrack, read_truth, write_json_lines, write_model, write_ply
 from ..motion import MotionParams, corrected, frame_to_frame, fuse, object_segments, on_model
 from ..outputs import OutputSet
@@ -83,7 +83,8 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
     frames (``plots``); rrd: a Rerun recording; png / panel: pictures of the model and of the last
     frame; poses (``motion='tracked'`` only): the repaired poses T_camera_object, as ``accum track``
     writes them (``POSES_OUTPUTS``), each with its status (``REPAIR_STATUS``) and its correction of the
-    recorded pose (``correction_deg``, ``correction_mm``): a robot's /tf checked on the images. All outputs are checked before the work and written together at the end. workers: processes
+    recorded pose (``correction_deg``, ``correction_mm``): a robot's /tf checked on the images. All
+    outputs are checked before the work and written together at the end. workers: processes
     extracting the next frames while this one accumulates (``runs.parallel``; the same model bytes
     whatever the number; None: ``parallel.resolve_workers``; more than 1 starts them from a fork
     server, which imports the caller's main module: guard a script's entry point with
@@ -155,8 +156,8 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
                 step = acc.step(frame, frame.T_camera_object, extraction,
                                 T_corrected=None if repaired is None else repaired[frame.index])
                 if repaired is not None:
-                    repair_rows.append((frame.timestamp_ns, repaired[frame.index], repair_status[frame.index],
-                                        pose_correction(frame.T_camera_object, repaired[frame.index])))
+                    repair_rows.append((frame.timestamp_ns, frame.T_camera_object, repaired[frame.index],
+                                        repair_status[frame.index]))
                 rows.add(step.extraction, frame.intrinsics, frame.T_camera_object)
                 motion_check.add(step.extraction.segments, frame.T_camera_object, frame.timestamp_ns)   # the recorded motion
                 result.distances_m.append(float(np.linalg.norm(frame.T_camera_object[:3, 3])))
@@ -218,11 +219,13 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
             else:   # the times it was accumulated over: ``accum eval`` refuses a truth of other times
                 write_model(files.open(path), result.model,
                             source_times_ns=[result.rows[0]["timestamp_ns"], result.rows[-1]["timestamp_ns"]])
-        if poses:
-            times_ns, Ts, status, extra = zip(*repair_rows)
-            write_pose_outputs(files, poses, PoseTrack(rec.camera_frame, rec.object_frame, np.array(times_ns, np.int64),
-                                                       np.array(Ts), list(status), list(extra)),
-                               POSES_TOPIC, f"{rec.object_frame}_repaired")
+        if poses:   # in the object frame of the model written (``LineAccumulation.T_object_model``)
+            times_ns, recorded_poses, used, status = zip(*repair_rows)
+            written = np.array(used) @ invert(acc.T_object_model())
+            write_pose_outputs(files, poses, PoseTrack(
+                rec.camera_frame, rec.object_frame, np.array(times_ns, np.int64), written, list(status),
+                [pose_correction(T_recorded, T) for T_recorded, T in zip(recorded_poses, written)]),
+                POSES_TOPIC, f"{rec.object_frame}_repaired")
         if history:
             write_json_lines(files.open(history), result.rows)
         if plot:
@@ -290,9 +293,10 @@ def _nothing_accepted(result: AccumulationResult) -> str:
             f"they belong to these images (--object-frame, --camera-frame)")
 
 
-# how ``tracked_poses`` placed a frame (the status of ``accum accumulate --poses``): refined on the model of
-# the fused poses and verified there; by frame-to-frame refinements with its neighbours (fused with the
-# recorded poses) only; by neither, i.e. its recorded pose (in the gauge of the others)
+# how ``tracked_poses`` placed a frame (the status of ``accum accumulate --poses``): its fused pose was
+# refined on the model of the fused poses and the refinement verified there (and fused again); else
+# frame-to-frame refinements with its neighbours placed it (``fuse`` kept at least one); else neither: its
+# recorded pose
 REPAIR_STATUS = ("tracked", "linked", "recorded")
 
 # ``tracked_poses``' four passes over the recording, then the accumulation itself: what a frame of each
@@ -356,8 +360,8 @@ def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str,
         recorded.append((frame.index, frame.T_camera_object))
     x = fuse(links, len(recorded), motion)
     fused = {index: corrected(T, xk) for (index, T), xk in zip(recorded, x)}
-    linked = {k for link in links for k in link}
-    status = {index: "linked" if k in linked else "recorded" for k, (index, _) in enumerate(recorded)}
+    # a frame that ``fuse`` left unlinked (no link, or all of them dropped) keeps its recorded pose exactly
+    status = {index: "linked" if np.any(xk) else "recorded" for (index, _), xk in zip(recorded, x)}
     if not motion.model_pass:
         return fused, status
     model = accepted(store.replay(frames_with_pose()), lambda frame: fused[frame.index])
