@@ -92,9 +92,10 @@ def guided_matches(left_img: np.ndarray, right_img: np.ndarray, left: Segments2D
     pieces_left, lo, hi = pieces_left[keep], lo[keep], hi[keep]
     if len(pieces_left) == 0:
         return m, right
-    best_d, voted = _vote(right_gradients, left, pieces_left, lo, hi, params)
+    rows, u_left = points_along(left, pieces_left)     # (T, R) px: where the votes and the location look
+    best_d, voted = _vote(right_gradients, left, pieces_left, rows, u_left, lo, hi, params)
     pieces_left, best_d = pieces_left[voted], best_d[voted]
-    found, located = _locate(right_gradients, left, pieces_left, best_d, params)
+    found, located = _locate(right_gradients, left, pieces_left, rows[voted], u_left[voted], best_d, params)
     pieces_left = pieces_left[located]
     found = found.select(located)
     # the left centre's row crosses each found right piece at its centre (``_locate``)
@@ -107,11 +108,11 @@ def guided_matches(left_img: np.ndarray, right_img: np.ndarray, left: Segments2D
         return m, right
     # scored as matching scores (``match``); together with up to ``REFERENCE_PAIRS`` of the frame's
     # matched pairs, from which ``_ncc`` takes the right grey levels to the left's (it needs 20 pairs)
-    appended = len(right) + np.arange(len(pieces_left))
     trial = right.concatenate(found)
     reference = slice(0, min(len(m.left), REFERENCE_PAIRS))
     score = _ncc(left_img, right_img, left, trial, np.concatenate([m.left[reference], pieces_left]),
-                 np.concatenate([m.right[reference], appended]), stereo)[-len(pieces_left):]
+                 np.concatenate([m.right[reference], len(right) + np.arange(len(pieces_left))]),
+                 stereo)[-len(pieces_left):]
     score = score - orientation_penalty(cos_diff, stereo)
     take = score >= stereo.min_score
     if not take.any():
@@ -143,14 +144,14 @@ def _disparity_prior(left: Segments2D, m: Matches, todo: np.ndarray, params: Gui
     return lo, hi
 
 
-def _vote(right_gradients: Gradients, left: Segments2D, todo, lo, hi, params: GuidedParams):
-    """(T,) per left piece ``todo`` the whole disparity (px) in [lo, hi] that the most of its rows vote
+def _vote(right_gradients: Gradients, left: Segments2D, todo, rows, u_left, lo, hi, params: GuidedParams):
+    """(T,) per left piece ``todo`` (its points ``rows``, ``u_left`` (T, R) px, ``stereo.points_along``)
+    the whole disparity (px) in [lo, hi] that the most of its rows vote
     for, and (T,) whether it has ``min_rows`` votes and no disparity ``min_gap_px`` or more away more
     than ``max_rival_rows``. A row votes for a disparity where the right image, along that row, has a
     local maximum (within a pixel) of the gradient across the piece, of the piece's polarity and at
     least ``min_contrast`` of its contrast (``Segments2D.contrast``, grey levels per px)."""
     width = int((hi - lo).max()) + 1
-    rows, u_left = points_along(left, todo)
     d = lo[:, None] + np.arange(width)                                                   # (T, W)
     response = _response(right_gradients, left, todo, u_left[:, :, None] - d[:, None, :], rows)   # (T, R, W)
     inside = (d <= hi[:, None])[:, None, :]
@@ -170,11 +171,11 @@ def _vote(right_gradients: Gradients, left: Segments2D, todo, lo, hi, params: Gu
     return lo + best, ok
 
 
-def _locate(gradients: Gradients, left: Segments2D, todo, d, params: GuidedParams):
+def _locate(gradients: Gradients, left: Segments2D, todo, rows, u_left, d, params: GuidedParams):
     """(T) right pieces (right image, px; line ids 0, ``t`` 0) through the right edge located on each
-    left piece's rows within ``locate_px`` of disparity ``d`` (T,) px, and (T,) whether ``min_rows``
-    rows found it, within ``max_residual_px`` RMS of a straight line."""
-    rows, u_left = points_along(left, todo)
+    left piece's rows (its points ``rows``, ``u_left`` (T, R) px) within ``locate_px`` of disparity
+    ``d`` (T,) px, and (T,) whether ``min_rows`` rows found it, within ``max_residual_px`` RMS of a
+    straight line."""
     u0 = u_left - d[:, None]
     offsets = np.arange(-params.locate_px, params.locate_px + 0.5)                      # (O,)
     response = _response(gradients, left, todo, u0[:, :, None] + offsets, rows)         # (T, R, O)

@@ -289,11 +289,7 @@ class LineSegmentType:
         directions = model.directions
         if "dir_info" in x:
             extra["dir_info"][mi] += o["dir_info"][oi]    # u u^T and n n^T: the sign of u does not matter
-            values, vectors = np.linalg.eigh(extra["dir_info"][mi])       # ascending
-            u = vectors[:, :, 0] * np.where(np.sum(vectors[:, :, 0] * model.directions[mi], axis=1) >= 0,
-                                            1.0, -1.0)[:, None]
-            pinned = (values[:, 1] - values[:, 0]) / np.radians(self.params.reference_direction_sigma_deg) ** 2
-            extra["inv_var_direction"][mi] = np.maximum(extra["inv_var_direction"][mi], pinned)
+            u = _direction_of_planes(extra, model.directions, mi, self.params)
         else:
             u = _unit(extra["dir_sum"][mi])
         directions[mi] = u
@@ -326,6 +322,17 @@ class LineSegmentType:
         projections = np.einsum("nkj,nj->nk", model.extra["views"], to_camera).max(axis=1)
         in_aspect = projections >= np.cos(np.radians(p.aspect_margin_deg)) * np.linalg.norm(to_camera, axis=1)
         return inside & not_critical & in_aspect
+
+
+def _direction_of_planes(extra: dict, directions: np.ndarray, mi: np.ndarray, p: LineModelParams) -> np.ndarray:
+    """(M, 3) the unit direction that each model segment ``mi``'s ``dir_info`` weighs least (its
+    smallest eigenvector, signed as its ``directions`` row), and, in place, its ``inv_var_direction``
+    raised to what the planes pin (the gap to the next eigenvalue; module docstring)."""
+    values, vectors = np.linalg.eigh(extra["dir_info"][mi])       # ascending
+    u = vectors[:, :, 0] * np.where(np.sum(vectors[:, :, 0] * directions[mi], axis=1) >= 0, 1.0, -1.0)[:, None]
+    pinned = (values[:, 1] - values[:, 0]) / np.radians(p.reference_direction_sigma_deg) ** 2
+    extra["inv_var_direction"][mi] = np.maximum(extra["inv_var_direction"][mi], pinned)
+    return u
 
 
 def _plane_sigma(length_px: np.ndarray, p: LineModelParams) -> np.ndarray:
@@ -532,10 +539,7 @@ def planes_from_image(model: Segments, candidates: np.ndarray, pieces: Segments2
     x = model.extra
     x["dir_info"][mi] += (p.image_plane_weight * (reference / _plane_sigma(pieces.lengths[j], p)) ** 2
                           )[:, None, None] * outer(normal)
-    values, vectors = np.linalg.eigh(x["dir_info"][mi])    # ascending: the direction weighs least
-    u = vectors[:, :, 0]
-    model.directions[mi] = u * np.where(np.sum(u * model.directions[mi], axis=1) >= 0, 1.0, -1.0)[:, None]
-    x["inv_var_direction"][mi] = np.maximum(x["inv_var_direction"][mi], (values[:, 1] - values[:, 0]) / reference ** 2)
+    model.directions[mi] = _direction_of_planes(x, model.directions, mi, p)
     x["image_planes"][mi] += 1
     counted = mi[x["image_planes"][mi] >= p.image_plane_min_frames]
     x["views"][counted] = _add_view(x["views"][counted], _unit(invert(T)[:3, 3] - model.centers[counted]),

@@ -144,17 +144,17 @@ class LineAccumulation:
             segments = segments.select(inside_box(transform_points(invert(T_camera_object), segments.centers),
                                                   np.asarray(self.params.box, float)))
         stats = self.core.update(segments, invert(T_camera_object), context)
-        rules = self.params.line_model
-        if rules.view_planes and rules.image_planes and len(self.core):
-            core = self.core   # its frame counter has moved on: this frame's confirmations say frame - 1
-            unsure = (core.log_odds >= 0) & (core.last_confirmed != core.frame - 1) & \
-                ~direction_known(core.entities, rules)
+        core, rules = self.core, self.params.line_model
+        known = direction_known(core.entities, rules)
+        if rules.view_planes and rules.image_planes and len(core):
+            # the core's frame counter has moved on: this frame's confirmations say frame - 1
+            unsure = (core.log_odds >= 0) & (core.last_confirmed != core.frame - 1) & ~known
             unused = np.ones(len(extraction.left), bool)
             unused[extraction.left_index] = False
-            planes_from_image(core.entities, unsure, extraction.left.select(unused), context, rules)
+            taken = planes_from_image(core.entities, unsure, extraction.left.select(unused), context, rules)
+            known[taken] = direction_known(core.entities.select(taken), rules)
         # accepted as the model is written (``to_model``: a segment's direction must be sure too)
-        stats.accepted = int(np.sum((self.core.log_odds >= 0) & direction_known(self.core.entities,
-                                                                                self.params.line_model)))
+        stats.accepted = int(np.sum((core.log_odds >= 0) & known))
         log.debug("frame %d: %s", frame.index, ", ".join(f"{k} {v}" for k, v in stats.__dict__.items()))
         return AccumulationStep(frame, extraction, T_camera_object, stats, estimate,
                                 len(extraction.segments) - len(segments))

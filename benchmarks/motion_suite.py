@@ -71,12 +71,11 @@ def pose_errors(noisy: str, repaired, truth) -> tuple[float, float, float, float
     from accumcli.model_io import read_poses
     from accumcli.recording import Recording
 
-    with Recording(noisy) as rec:
-        recorded = {f.timestamp_ns: f.T_camera_object for f in rec.frames()}
     track = read_poses(repaired)
     true = {int(t): T for t, T in zip(truth.times_ns, truth.poses)}
-    errors = np.array([(*pose_error(recorded[int(t)], true[int(t)]), *pose_error(T, true[int(t)]))
-                       for t, T in zip(track.times_ns, track.poses)])
+    with Recording(noisy) as rec:   # the recorded poses at the repaired ones' stamps, no image decoded
+        errors = np.array([(*pose_error(rec.pose_at(int(t)), true[int(t)]), *pose_error(T, true[int(t)]))
+                           for t, T in zip(track.times_ns, track.poses)])
     return (*np.median(errors[:, :2], axis=0) * [1, 1000], *np.median(errors[:, 2:], axis=0) * [1, 1000],
             float(track.tracked().mean()))
 
