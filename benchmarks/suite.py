@@ -9,6 +9,8 @@ completeness / background, and the accumulation's stereo pairs per second; then 
 worst row of every column. ``ok twice`` against 1 is what extraction loses, ``complete`` against
 ``ok twice`` what accumulation loses (``in model`` against ``complete``: found, never confirmed);
 ``object`` and ``gripper`` split ``complete`` by the truth edges' part, where the truth names them.
+A second table splits what extraction loses (1 - ``ok twice``) by the last stage that two frames passed
+(``accumcli.funnel``): never detected twice, critical, unmatched, wrong in 3D.
 
 The set: simulated recordings with fixed seeds (the simulator's random scenes where it has them),
 the real chessboard (sample_data/), and every recording of ../shared/data/devset (but the tracking
@@ -40,6 +42,11 @@ COLUMNS = [("2d", "funnel_detected_2d", "high"), ("not crit", "funnel_not_critic
            ("complete", "completeness", "high"), ("object", "completeness_object", "high"),
            ("gripper", "completeness_gripper", "high"), ("backgr", "background", "low"),
            ("pairs/s", "pairs_per_second", "high")]
+LOSS_COLUMNS = [("ok twice", "funnel_correct_twice", "high"), ("lost 2d", "funnel_lost_2d", "low"),
+                ("lost critical", "funnel_lost_critical", "low"), ("lost unmatched", "funnel_lost_unmatched", "low"),
+                ("lost 3d", "funnel_lost_3d", "low")]
+LOSS_TITLE = ("Where the edge length that no two frames got right is lost (shares of the counted length; with "
+              "``ok twice`` they sum to 1): the last stage that at least two frames passed.")
 
 
 @dataclasses.dataclass
@@ -125,19 +132,19 @@ def _cell(value) -> str:
     return f"{value:.3f}" if isinstance(value, float) and value == value else ("-" if value is None else str(value))
 
 
-def table(results: dict[str, dict], rows: list[Row]) -> list[str]:
-    head = "| recording | source | " + " | ".join(c[0] for c in COLUMNS) + " |"
-    lines = [head, "|" + "---|" * (len(COLUMNS) + 2)]
+def table(results: dict[str, dict], rows: list[Row], columns=COLUMNS) -> list[str]:
+    head = "| recording | source | " + " | ".join(c[0] for c in columns) + " |"
+    lines = [head, "|" + "---|" * (len(columns) + 2)]
     for row in rows:
         r = results[row.name]
         if "error" in r:
             lines.append(f"| {row.name} | {row.source} | error: {r['error']} |")
             continue
-        lines.append(f"| {row.name} | {row.source} | " + " | ".join(_cell(r.get(key)) for _, key, _ in COLUMNS) + " |")
+        lines.append(f"| {row.name} | {row.source} | " + " | ".join(_cell(r.get(key)) for _, key, _ in columns) + " |")
     good = [r for r in results.values() if "error" not in r]
     for label, pick in (("median", statistics.median), ("worst", None)):
         cells = []
-        for _, key, better in COLUMNS:
+        for _, key, better in columns:
             values = [r[key] for r in good if isinstance(r.get(key), float) and r[key] == r[key]]
             if not values:
                 cells.append("-")
@@ -173,7 +180,7 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     results = score_rows(rows, functools.partial(score, view_planes=not args.average_directions, motion=args.motion,
                                                       right_search=args.right_search))
-    lines = table(results, rows)
+    lines = table(results, rows) + ["", LOSS_TITLE, ""] + table(results, rows, LOSS_COLUMNS)
     print("\n".join(lines))
     print(f"\n{len(rows)} recordings in {time.perf_counter() - t0:.0f} s")
     if not args.no_save and not args.only and not variant:

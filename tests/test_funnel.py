@@ -115,3 +115,40 @@ def test_the_truths_seen_bits_are_those_of_the_pose_it_chose_within_the_toleranc
     for t_ns in (0, 500_000):
         result = funnel([(t_ns, segment, {"intrinsics": intrinsics})], truth)
         assert result["funnel_correct_3d"] == 0.5 and result["funnel_seen_from"] == "truth per-frame bits", t_ns
+
+
+def test_the_edge_no_two_frames_got_right_is_charged_to_the_stage_where_it_was_lost():
+    """A vertical edge (not critical) in three frames: its upper half matched in all three but never
+    triangulated right (lost in 3D), its lower half detected but matched in one frame only (lost
+    unmatched); then a horizontal edge whose critical segment nothing triangulated (lost critical), and
+    one no frame detected (lost in 2D). The losses and the share right twice sum to 1."""
+    T = np.eye(4)
+    T[2, 3] = 1.0
+    vertical = _truth([0, -0.05, 0], [0, 0.05, 0], times_ns=[0, 10, 20], poses=[T, T, T])
+    upper, lower = [320.0, 215.0, 320.0, 239.0], [320.0, 241.0, 320.0, 265.0]
+    frames = [(t, Segments.empty("camera_left"),
+               {"intrinsics": INTR, "segments_2d": {"left": [upper, lower], "matched": [0, 1] if t == 0 else [0],
+                                                    "critical_angle_deg": 8.0}}) for t in (0, 10, 20)]
+    result = funnel(frames, vertical)
+    assert result["funnel_correct_twice"] == 0.0 and result["funnel_lost_2d"] == result["funnel_lost_critical"] == 0.0
+    assert 0.45 <= result["funnel_lost_3d"] <= 0.55 and 0.45 <= result["funnel_lost_unmatched"] <= 0.55
+    assert abs(result["funnel_lost_3d"] + result["funnel_lost_unmatched"] - 1.0) < 1e-9
+
+    horizontal = _truth([-0.05, 0, 0], [0.05, 0, 0], times_ns=[0, 10], poses=[T, T])
+    critical = {"intrinsics": INTR, "segments_2d": {"left": [[295.0, 240.0, 345.0, 240.0]], "matched": [],
+                                                    "critical_angle_deg": 8.0}}
+    result = funnel([(0, Segments.empty("camera_left"), critical), (10, Segments.empty("camera_left"), critical)],
+                    horizontal)
+    assert result["funnel_lost_critical"] == 1.0
+    nothing = {"intrinsics": INTR, "segments_2d": {"left": [], "matched": [], "critical_angle_deg": 8.0}}
+    result = funnel([(0, Segments.empty("camera_left"), nothing), (10, Segments.empty("camera_left"), nothing)],
+                    horizontal)
+    assert result["funnel_lost_2d"] == 1.0 and result["funnel_correct_twice"] == 0.0
+
+
+def test_a_frames_file_without_2d_segments_gives_no_losses():
+    T = np.eye(4)
+    T[2, 3] = 1.0
+    truth = _truth([0, -0.05, 0], [0, 0.05, 0], times_ns=[0, 10], poses=[T, T])
+    result = funnel([(0, _vertical_segment(-0.05, 0.05), {}), (10, _vertical_segment(-0.05, 0.05), {})], truth)
+    assert result["funnel_correct_twice"] >= 0.98 and "funnel_lost_3d" not in result
