@@ -52,10 +52,11 @@ suite: $(VENV)/.installed
 	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python benchmarks/suite.py
 	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python benchmarks/track_suite.py
 
-# Are the extracted segments' depth and direction sigmas honest? Errors against truth per sigma bin (after make suite).
+# Are the extracted segments' depth and direction sigmas honest? Errors against truth per sigma bin (after make suite), and single-frame direction errors by how pieces were triangulated (devset).
 .PHONY: uncertainty
 uncertainty: $(VENV)/.installed
 	$(BIN)/python benchmarks/uncertainty.py
+	$(BIN)/python benchmarks/piece_directions.py
 
 # --motion tracked on noisy gripper poses against the exact-pose model (random scenes, a few minutes).
 .PHONY: motion

@@ -15,14 +15,16 @@ a second frame confirms, so this is about the completeness it can reach from the
 little more where merged pieces grow along an edge): the gap between it and the model's
 completeness is lost in accumulation, the gap below 1 in extraction.
 
-Where that gap below 1 is lost (with the 2D segments): each counted sample that fewer than two frames
-got right is charged to the last stage that at least two of its frames passed, as shares of the
-counted samples: ``lost_2d`` (fewer than two frames detected it), ``lost_critical`` (detected, but
-critical, and not triangulated from its line's ends), ``lost_unmatched`` (usable, but stereo matched
-it in fewer than two frames), ``lost_3d`` (matched in two or more, but its 3D segments were wrong:
-on the devset mostly a direction tilted in depth, which one stereo pair of short pieces cannot fix).
-The four and ``correct_twice`` sum to 1. Why: a figure that misses its target should name the stage
-that limits it, and the per-frame funnel does not say whether the same edges fail in every frame.
+Where that gap below 1 is lost (when every frame judged carries its 2D segments): each counted
+sample that fewer than two frames got right is charged to the last stage that at least two of its
+frames passed, as shares of the counted samples: ``lost_unseen`` (fewer than two of the frames judged
+showed it: a ``--frames`` subset, frames without a truth pose), ``lost_2d`` (shown, but fewer than
+two frames detected it), ``lost_critical`` (detected, but critical, and not triangulated from its
+line's ends), ``lost_unmatched`` (usable, but stereo matched it in fewer than two frames), ``lost_3d``
+(matched in two or more, but its 3D segments were wrong: on the devset mostly a direction tilted in
+depth, which one stereo pair of short pieces cannot fix). The five and ``correct_twice`` sum to 1.
+Why: a figure that misses its target should name the stage that limits it, and the per-frame funnel
+does not say whether the same edges fail in every frame.
 
 Which samples a frame shows: the truth's per-pose ``seen`` bits (base64 of numpy.packbits over
 the samples of all edges, in edge order) where it has them; otherwise (an approximation, said in
@@ -45,7 +47,7 @@ from .segments import Segments
 DETECT_PX = 1.5      # across-distance of a 2D segment from a sample's projection, pixels
 DETECT_DEG = 10.0    # direction difference of a 2D segment from the projected edge, degrees
 STAGES = ("detected_2d", "not_critical", "matched", "correct_3d")
-LOSSES = ("lost_2d", "lost_critical", "lost_unmatched", "lost_3d")   # module docstring
+LOSSES = ("lost_unseen", "lost_2d", "lost_critical", "lost_unmatched", "lost_3d")   # module docstring
 
 
 def per_pose_seen(truth, samples: int) -> dict[int, np.ndarray]:
@@ -109,7 +111,8 @@ def frame_funnel(segments_camera: Segments, doc: dict, T_camera_object: np.ndarr
                  times_correct: np.ndarray | None = None, times_reached: np.ndarray | None = None) -> dict:
     """Counts of seen samples reaching each stage in one frame (``doc``: the frames-file line).
     ``times_correct``: (S,) int, incremented in place at the samples this frame covers correctly;
-    ``times_reached``: (3, S) int, likewise at the samples it detected, found not critical, matched."""
+    ``times_reached``: (4, S) int, likewise at the samples it showed, detected, found not critical,
+    matched (left alone without 2D segments and intrinsics)."""
     intr = doc.get("intrinsics")
     if seen is None:
         seen = approximate_seen(edges, T_camera_object, intr) if intr else edges.counted.copy()
@@ -125,8 +128,11 @@ def frame_funnel(segments_camera: Segments, doc: dict, T_camera_object: np.ndarr
         usable = angle >= float(two_d["critical_angle_deg"])
         matched = np.zeros(len(left), bool)
         matched[np.asarray(two_d["matched"], int)] = True
+        if times_reached is not None:
+            times_reached[0, samples] += 1
         for row, (stage, keep) in enumerate((("detected_2d", np.ones(len(segment_of), bool)),
-                                             ("not_critical", usable[segment_of]), ("matched", matched[segment_of]))):
+                                             ("not_critical", usable[segment_of]), ("matched", matched[segment_of])),
+                                            start=1):
             reached = np.unique(sample_of[keep])
             counts[stage] = int(len(reached))
             if times_reached is not None:
@@ -142,12 +148,12 @@ def frame_funnel(segments_camera: Segments, doc: dict, T_camera_object: np.ndarr
 
 def _losses(times_correct: np.ndarray, times_reached: np.ndarray) -> dict:
     """``funnel_lost_*`` (module docstring) of the counted samples: ``times_correct`` (S,) and
-    ``times_reached`` (3, S), the frames that got each right and that detected, found not critical and
-    matched it."""
+    ``times_reached`` (4, S), the frames that got each right and that showed, detected, found not
+    critical and matched it."""
     twice = times_reached >= 2
     lost = times_correct < 2
-    # the last stage passed twice: matched, else not critical, else detected, else none
-    stage = np.select([twice[2], twice[1], twice[0]], [3, 2, 1], 0)
+    # the last stage passed twice: matched, else not critical, else detected, else shown, else none
+    stage = np.select([twice[3], twice[2], twice[1], twice[0]], [4, 3, 2, 1], 0)
     return {f"funnel_{name}": float(np.mean(lost & (stage == k))) for k, name in enumerate(LOSSES)}
 
 
@@ -159,8 +165,9 @@ def funnel(frames, truth, tol: Tolerances = Tolerances()) -> dict:
     bits = per_pose_seen(truth, len(edges.points))
     totals: dict[str, int] = {}
     times_correct = np.zeros(len(edges.points), np.int64)
-    times_reached = np.zeros((3, len(edges.points)), np.int64)
+    times_reached = np.zeros((4, len(edges.points)), np.int64)
     projected = 0   # frames without the truth's bits, whose seen samples are projected (no occlusion)
+    judged = with_2d = 0
     for t_ns, segments, doc in frames:
         T = truth.pose_at(int(t_ns))
         if T is None:
@@ -168,13 +175,15 @@ def funnel(frames, truth, tol: Tolerances = Tolerances()) -> dict:
         # the bits of the truth pose that pose_at chose (within its tolerance, not only at the same stamp)
         seen = bits.get(int(truth.times_ns[np.argmin(np.abs(truth.times_ns - int(t_ns)))]))
         projected += seen is None
-        for key, value in frame_funnel(segments, doc, T, edges, seen, tol, times_correct, times_reached).items():
+        counts = frame_funnel(segments, doc, T, edges, seen, tol, times_correct, times_reached)
+        judged, with_2d = judged + 1, with_2d + ("detected_2d" in counts)
+        for key, value in counts.items():
             totals[key] = totals.get(key, 0) + value
     n = max(totals.get("seen", 0), 1)
     result = {f"funnel_{stage}": totals[stage] / n for stage in STAGES if stage in totals}
     if edges.counted.any():
         result["funnel_correct_twice"] = float((times_correct[edges.counted] >= 2).mean())
-        if "detected_2d" in totals:
+        if judged and with_2d == judged:    # a frame without them would charge its samples to 2D
             result.update(_losses(times_correct[edges.counted], times_reached[:, edges.counted]))
     result["funnel_seen_from"] = ("projection (no occlusion)" if not bits else "truth per-frame bits" if not projected
                                   else f"truth per-frame bits ({projected} frames by projection, no occlusion)")

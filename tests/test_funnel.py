@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from accumcli.evaluate import EdgeSamples, evaluate_model
-from accumcli.funnel import detected_by, frame_funnel, funnel
+from accumcli.funnel import LOSSES, detected_by, frame_funnel, funnel
 from accumcli.model_io import Truth
 from accumcli.segments import Segments
 
@@ -117,35 +117,69 @@ def test_the_truths_seen_bits_are_those_of_the_pose_it_chose_within_the_toleranc
         assert result["funnel_correct_3d"] == 0.5 and result["funnel_seen_from"] == "truth per-frame bits", t_ns
 
 
+def _losses_sum(result: dict) -> float:
+    return result["funnel_correct_twice"] + sum(result[f"funnel_{name}"] for name in LOSSES)
+
+
+def _frame_2d(t_ns: int, segments: Segments, left: list, matched: list) -> tuple:
+    return t_ns, segments, {"intrinsics": INTR, "segments_2d": {"left": left, "matched": matched,
+                                                                "critical_angle_deg": 8.0}}
+
+
+UPPER, LOWER = [320.0, 215.0, 320.0, 239.0], [320.0, 241.0, 320.0, 265.0]   # the vertical edge's halves in 2D
+
+
 def test_the_edge_no_two_frames_got_right_is_charged_to_the_stage_where_it_was_lost():
     """A vertical edge (not critical) in three frames: its upper half matched in all three but never
     triangulated right (lost in 3D), its lower half detected but matched in one frame only (lost
-    unmatched); then a horizontal edge whose critical segment nothing triangulated (lost critical), and
-    one no frame detected (lost in 2D). The losses and the share right twice sum to 1."""
+    unmatched); then a horizontal edge whose critical segment nothing triangulated (lost critical), one
+    whose critical segment was triangulated (from its ends) twice but wrong (lost in 3D), and one no
+    frame detected (lost in 2D). The losses and the share right twice sum to 1."""
     T = np.eye(4)
     T[2, 3] = 1.0
     vertical = _truth([0, -0.05, 0], [0, 0.05, 0], times_ns=[0, 10, 20], poses=[T, T, T])
-    upper, lower = [320.0, 215.0, 320.0, 239.0], [320.0, 241.0, 320.0, 265.0]
-    frames = [(t, Segments.empty("camera_left"),
-               {"intrinsics": INTR, "segments_2d": {"left": [upper, lower], "matched": [0, 1] if t == 0 else [0],
-                                                    "critical_angle_deg": 8.0}}) for t in (0, 10, 20)]
+    frames = [_frame_2d(t, Segments.empty("camera_left"), [UPPER, LOWER], [0, 1] if t == 0 else [0])
+              for t in (0, 10, 20)]
     result = funnel(frames, vertical)
-    assert result["funnel_correct_twice"] == 0.0 and result["funnel_lost_2d"] == result["funnel_lost_critical"] == 0.0
+    assert result["funnel_correct_twice"] == 0.0
+    assert result["funnel_lost_2d"] == result["funnel_lost_critical"] == result["funnel_lost_unseen"] == 0.0
     assert 0.45 <= result["funnel_lost_3d"] <= 0.55 and 0.45 <= result["funnel_lost_unmatched"] <= 0.55
-    assert abs(result["funnel_lost_3d"] + result["funnel_lost_unmatched"] - 1.0) < 1e-9
+    assert abs(_losses_sum(result) - 1.0) < 1e-9
 
     horizontal = _truth([-0.05, 0, 0], [0.05, 0, 0], times_ns=[0, 10], poses=[T, T])
-    critical = {"intrinsics": INTR, "segments_2d": {"left": [[295.0, 240.0, 345.0, 240.0]], "matched": [],
-                                                    "critical_angle_deg": 8.0}}
-    result = funnel([(0, Segments.empty("camera_left"), critical), (10, Segments.empty("camera_left"), critical)],
-                    horizontal)
-    assert result["funnel_lost_critical"] == 1.0
-    nothing = {"intrinsics": INTR, "segments_2d": {"left": [], "matched": [], "critical_angle_deg": 8.0}}
-    result = funnel([(0, Segments.empty("camera_left"), nothing), (10, Segments.empty("camera_left"), nothing)],
-                    horizontal)
+    empty = Segments.empty("camera_left")
+    for matched, lost in (([], "funnel_lost_critical"), ([0], "funnel_lost_3d")):
+        result = funnel([_frame_2d(t, empty, [[295.0, 240.0, 345.0, 240.0]], matched) for t in (0, 10)], horizontal)
+        assert result[lost] == 1.0 and abs(_losses_sum(result) - 1.0) < 1e-9, matched
+    result = funnel([_frame_2d(t, empty, [], []) for t in (0, 10)], horizontal)
     assert result["funnel_lost_2d"] == 1.0 and result["funnel_correct_twice"] == 0.0
 
 
+def test_the_share_right_twice_is_not_charged_and_uncounted_samples_are_left_out():
+    """The upper half right in two frames (not lost), the lower half matched in both but never right
+    (lost in 3D); a second edge the truth does not count for completeness, never detected, is in no share."""
+    T = np.eye(4)
+    T[2, 3] = 1.0
+    two = Truth("gripper", "camera_left", np.array([[0, -0.05, 0], [0.02, -0.05, 0]], float),
+                np.array([[0, 0.05, 0], [0.02, 0.05, 0]], float), ["", ""], [np.full(50, 5), np.full(50, 5)],
+                np.array([True, False]), np.array([0, 10], np.int64), np.array([T, T]), {})
+    frames = [_frame_2d(t, _vertical_segment(-0.05, 0.0), [UPPER, LOWER], [0, 1]) for t in (0, 10)]
+    result = funnel(frames, two)
+    assert 0.45 <= result["funnel_correct_twice"] <= 0.55 and 0.45 <= result["funnel_lost_3d"] <= 0.55
+    assert result["funnel_lost_2d"] == 0.0 and abs(_losses_sum(result) - 1.0) < 1e-9
+
+
+def test_losses_need_every_frame_with_2d_segments_and_two_frames_showing_a_sample():
+    """A frame without 2D segments among those judged: no losses (its samples would look undetected);
+    a single frame judged: every counted sample shown fewer than twice (lost unseen)."""
+    T = np.eye(4)
+    T[2, 3] = 1.0
+    truth = _truth([0, -0.05, 0], [0, 0.05, 0], times_ns=[0, 10], poses=[T, T])
+    empty = Segments.empty("camera_left")
+    mixed = [_frame_2d(0, empty, [UPPER, LOWER], [0, 1]), (10, _vertical_segment(-0.05, 0.05), {"intrinsics": INTR})]
+    assert "funnel_lost_3d" not in funnel(mixed, truth)
+    result = funnel([_frame_2d(0, empty, [UPPER, LOWER], [0, 1])], truth)
+    assert result["funnel_lost_unseen"] == 1.0 and abs(_losses_sum(result) - 1.0) < 1e-9
 def test_a_frames_file_without_2d_segments_gives_no_losses():
     T = np.eye(4)
     T[2, 3] = 1.0

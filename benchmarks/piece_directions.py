@@ -1,0 +1,83 @@
+"""How far single-frame 3D directions are off, by how the piece was triangulated (part of ``make uncertainty``).
+
+For every non-critical 3D piece of the devset recordings (``../shared/data/devset``, all frames; the
+tracking one left out) whose centre lies within 4 mm of a truth edge: the share more than 10 degrees
+off that edge (the evaluation's limit) and the median error, for pieces on a *stretch* of three or
+more (``stereo.triangulate`` fits disparity along the left/right line pair they share) and for the
+others, binned by the span of their lines (the shorter of the left and right line's extent, px).
+Why: the largest loss of the scoreboard's second table is the edge length matched but wrong in 3D,
+and this says which pieces make it: with an 8 cm baseline at 0.55-0.8 m the two planes of a short
+line meet at a few degrees, so the depth tilt of a piece alone on its stretch is its lines' angle
+error times about ten.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from common import ROOT  # noqa: E402
+
+DEVSET = ROOT.parent / "shared" / "data" / "devset"
+NEAR_M = 0.004
+SPAN_BINS_PX = (0, 15, 25, 40, 10_000)
+
+
+def pieces(recording: Path, truth_file: Path) -> np.ndarray:
+    """(N, 3): direction error deg, stretch size, line span px of the on-edge non-critical pieces."""
+    from accumcli.evaluate import _point_edge_distance
+    from accumcli.extract import extract_frame
+    from accumcli.geometry import invert
+    from accumcli.model_io import read_truth
+    from accumcli.recording import Recording
+
+    truth = read_truth(str(truth_file))
+    edge_dir = (truth.b - truth.a) / np.linalg.norm(truth.b - truth.a, axis=1, keepdims=True)
+    rows = []
+    with Recording(str(recording)) as rec:
+        for frame in rec.frames():
+            T = truth.pose_at(frame.timestamp_ns)
+            out = extract_frame(frame)
+            stereo = out.right_index >= 0            # -1: a critical piece, triangulated from its run's ends
+            if T is None or not stereo.any():
+                continue
+            left, right = out.left, out.right
+            li, ri = out.left_index[stereo], out.right_index[stereo]
+            stretch = left.line_id[li] * (int(right.line_id.max()) + 1) + right.line_id[ri]
+            _, where, size = np.unique(stretch, return_inverse=True, return_counts=True)
+            spans = [(hi - lo)[side.line_id[index]] for side, index in ((left, li), (right, ri))
+                     for lo, hi in [side.line_extents()]]
+            local = out.segments.select(np.flatnonzero(stereo)).transformed(invert(T), "object")
+            distances = _point_edge_distance(local.centers, truth.a, truth.b)
+            nearest = distances.argmin(axis=1)
+            near = distances[np.arange(len(local)), nearest] <= NEAR_M
+            error = np.degrees(np.arccos(np.clip(np.abs(np.sum(local.directions * edge_dir[nearest], 1)), 0, 1)))
+            rows.append(np.column_stack([error, size[where.ravel()], np.minimum(*spans)])[near])
+    return np.concatenate(rows) if rows else np.zeros((0, 3))
+
+
+def main() -> int:
+    files = sorted(p for p in DEVSET.glob("*.mcap") if "track" not in p.name) if DEVSET.is_dir() else []
+    if not files:
+        print(f"no devset at {DEVSET}: nothing to measure")
+        return 0
+    e = np.concatenate([pieces(p, p.with_suffix(".truth.json")) for p in files])
+    print(f"{len(e)} non-critical pieces within {NEAR_M * 1000:.0f} mm of an edge, {len(files)} devset recordings\n")
+    print("| pieces | line span px | count | more than 10 deg off | median error deg |")
+    print("|---|---|---|---|---|")
+    groups = [("on a stretch of 3+", e[:, 1] >= 3, 0, SPAN_BINS_PX[-1])]
+    groups += [("alone or in two", e[:, 1] < 3, lo, hi) for lo, hi in zip(SPAN_BINS_PX, SPAN_BINS_PX[1:])]
+    for label, kind, lo, hi in groups:
+        rows = e[kind & (e[:, 2] >= lo) & (e[:, 2] < hi)]
+        if len(rows):
+            span = "any" if hi == SPAN_BINS_PX[-1] and lo == 0 else f"{lo}-{hi}" if hi < SPAN_BINS_PX[-1] else f">= {lo}"
+            print(f"| {label} | {span} | {len(rows)} | {np.mean(rows[:, 0] > 10):.2f} | {np.median(rows[:, 0]):.1f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
