@@ -584,13 +584,12 @@ def _verify_at(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, grads,
     shown_segments = float(expected.sum()) / params.samples_per_segment
     rate = accepted.extra.get(FOUND_RATE)
     return _verify(T, points_obj, measurements, intr, tukey, params, expected, shown_segments / max(len(accepted), 1),
-                   owner, segments, None if rate is None else rate[segments][owner], shown_segments)
+                   owner, segments, None if rate is None else rate[segments][owner], shown_segments=shown_segments)
 
 
 def _verify(T: np.ndarray, points_obj: np.ndarray, measurements, intr: StereoIntrinsics, tukey: float,
             params: TrackParams, expected: np.ndarray, shown: float, owner: np.ndarray,
-            segments: np.ndarray, found_rate: np.ndarray | None = None,
-            shown_segments: float = float("inf")) -> PoseEstimate:
+            segments: np.ndarray, found_rate: np.ndarray | None = None, *, shown_segments: float) -> PoseEstimate:
     """The estimate at the final pose ``T`` against the finest level's measurements: inliers, RMS,
     coverage (both images, each sample weighted by ``expected`` (S,), ``expected_weights``; and times
     ``found_rate`` (S,) if given, ``coverage_found``), the

@@ -582,8 +582,9 @@ def test_after_the_restarts_every_verified_pose_that_fits_as_badly_is_lost(noisy
     tracker = PoseTracker(model_of_exact)
     with Recording(exact) as rec:
         frames = list(rec.frames(0, 5))
-    rms = [tracker.update(f, f.T_camera_object if f.index == 0 else None).residual_px for f in frames[:4]]
-    tracker._recent_rms.extend([np.median(rms) / 2] * 3)
+    first = [tracker.update(f, f.T_camera_object if f.index == 0 else None) for f in frames[:4]]
+    assert all(e.status == "tracked" and 10 <= e.shown_segments < len(model_of_exact) for e in first)
+    tracker._recent_rms.extend([np.median([e.residual_px for e in first]) / 2] * 3)
     tracker.params = replace(tracker.params, suspect_limit_share=0.0)
     estimate = tracker.update(frames[4])
     assert estimate.status == "lost" and "fits worse than the recent frames" in estimate.reason
