@@ -85,6 +85,7 @@ from .lines2d import Segments2D
 from .metric import MetricThresholds, candidate_pairs, d_o, d_p, pair_costs
 from .recording import StereoIntrinsics
 from .segments import Segments, concatenate
+from .stereo import view_plane_normals
 from .visibility import segments_in_both_images
 
 
@@ -532,9 +533,7 @@ def planes_from_image(model: Segments, candidates: np.ndarray, pieces: Segments2
     mi = idx[i]
     # the piece's plane through the camera: normal of its two ends' rays, into the object frame
     ends = pieces.endpoints()[j]
-    rays = np.stack([(ends[..., 0] - intr.cx) / intr.fx, (ends[..., 1] - intr.cy) / intr.fy,
-                     np.ones(ends.shape[:2])], axis=2)
-    normal = _unit(np.cross(rays[:, 0], rays[:, 1])) @ T[:3, :3]
+    normal = _unit(view_plane_normals(ends[:, 0], ends[:, 1], intr)) @ T[:3, :3]
     reference = np.radians(p.reference_direction_sigma_deg)
     x = model.extra
     x["dir_info"][mi] += (p.image_plane_weight * (reference / _plane_sigma(pieces.lengths[j], p)) ** 2

@@ -350,10 +350,7 @@ def triangulate(left: Segments2D, right: Segments2D, m: Matches, intr: StereoInt
     if params.row_offset_px:   # a row offset dy moves an edge's crossing of a row by dy times its cotangent
         line = left.line_direction[m.left]
         m = replace(m, disparity=m.disparity - params.row_offset_px * line[:, 0] / line[:, 1])
-    n_right_lines = int(right.line_id.max()) + 1
-    stretch_key = left.line_id[m.left] * n_right_lines + right.line_id[m.right]
-    _, stretch = np.unique(stretch_key, return_inverse=True)
-    stretch = stretch.ravel()
+    stretch = stretch_ids(left, right, m.left, m.right)
     n = int(stretch.max()) + 1
     centers, dirs = left.centers[m.left], left.directions[m.left]
     axis = np.zeros((n, 2))
@@ -398,10 +395,6 @@ def triangulate(left: Segments2D, right: Segments2D, m: Matches, intr: StereoInt
     sigma_slope = np.maximum(sigma[stretch], 0.05) / np.sqrt(np.maximum(count[stretch] * spread[stretch] ** 2 / 12,
                                                                         1e-9))
     # a plane is as sure as the shorter of its two lines (module docstring: an empirical figure)
-    def line_span(side: Segments2D, index: np.ndarray) -> np.ndarray:
-        low, high = side.line_extents()
-        return (high - low)[side.line_id[index]]
-
     span = np.minimum(line_span(left, m.left), line_span(right, m.right))
     plane_sigma = np.maximum(params.plane_sigma_deg,
                              np.degrees(params.line_fit_sigma_px * np.sqrt(12) / np.maximum(span, 1.0)))
@@ -414,6 +407,26 @@ def triangulate(left: Segments2D, right: Segments2D, m: Matches, intr: StereoInt
                         {"sigma_depth_m": sigma_depth, "sigma_direction_rad": sigma_direction,
                          "disparity_px": d_center, "u": centers[:, 0], "v": centers[:, 1]})
     return segments.select(idx), idx
+
+
+def stretch_ids(left: Segments2D, right: Segments2D, li: np.ndarray, ri: np.ndarray) -> np.ndarray:
+    """(P,) int in [0, stretches): the stretch of each matched pair (left segment ``li``, right segment
+    ``ri``), i.e. the pair of left and right lines it lies on (``triangulate`` fits disparity along it)."""
+    _, stretch = np.unique(left.line_id[li] * (int(right.line_id.max()) + 1) + right.line_id[ri], return_inverse=True)
+    return stretch.ravel()
+
+
+def line_span(side: Segments2D, index: np.ndarray) -> np.ndarray:
+    """(P,) px: how far the local segments of the line that each segment ``index`` lies on reach along it."""
+    low, high = side.line_extents()
+    return (high - low)[side.line_id[index]]
+
+
+def view_plane_normals(a: np.ndarray, b: np.ndarray, intr: StereoIntrinsics) -> np.ndarray:
+    """(N, 3) normals (camera frame, not unit) of the planes through the camera centre and the image
+    points ``a`` and ``b`` (N, 2) px: the plane that an image line through them back-projects to."""
+    K_inv = np.linalg.inv(intr.K)
+    return np.cross(np.column_stack([a, np.ones(len(a))]) @ K_inv.T, np.column_stack([b, np.ones(len(b))]) @ K_inv.T)
 
 
 def _ends_on_rays(center, direction, uv_minus, uv_plus, length, intr: StereoIntrinsics, min_sine: float = 0.2,
@@ -459,13 +472,8 @@ def _plane_intersection(left: Segments2D, right: Segments2D, m: Matches,
                         intr: StereoIntrinsics) -> tuple[np.ndarray, np.ndarray]:
     """(K, 3) unit 3D directions from the planes through each camera centre and its 2D line, and
     (K,) the sine of the angle between the two planes."""
-    K_inv = np.linalg.inv(intr.K)
-
     def plane_normal(seg: Segments2D, index: np.ndarray) -> np.ndarray:
-        c = np.column_stack([seg.centers[index], np.ones(len(index))])
-        e = c.copy()
-        e[:, :2] += seg.line_direction[index]
-        return np.cross(c @ K_inv.T, e @ K_inv.T)
+        return view_plane_normals(seg.centers[index], seg.centers[index] + seg.line_direction[index], intr)
 
     a, b = plane_normal(left, m.left), plane_normal(right, m.right)
     direction = np.cross(a, b)

@@ -48,14 +48,15 @@ def score(seed: int) -> dict:
     runs += [(name, recording(f"motion_{name}_{seed}", frames=24, seed=seed, scene="random", **noise), "gripper")
              for name, noise in PERTURBED.items()]
     out = {}
+    repaired = CACHE / f"motion_repaired_{seed}.poses.json"
     for name, path, motion in runs:
         t0 = time.perf_counter()
-        poses = str(CACHE / f"motion_repaired_{seed}.poses.json") if motion == "tracked" else ()
+        poses = str(repaired) if motion == "tracked" else ()
         model = accumulate_recording(path, params=AccumulateParams(motion=motion), poses=poses).model
         out[f"{name}_s"] = time.perf_counter() - t0
         e = evaluate_model(model, truth)
         out[name] = (e["precision"], e["completeness"])
-    out["pose_errors"] = pose_errors(noisy, CACHE / f"motion_repaired_{seed}.poses.json", truth)
+    out["pose_errors"] = pose_errors(noisy, repaired, truth)
     for name in ("tracked", *PERTURBED):
         out[f"{name}_shortfall"] = max(out["exact"][0] - out[name][0], out["exact"][1] - out[name][1])
     return out

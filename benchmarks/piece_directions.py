@@ -34,6 +34,7 @@ def pieces(recording: Path, truth_file: Path) -> np.ndarray:
     from accumcli.geometry import invert
     from accumcli.model_io import read_truth
     from accumcli.recording import Recording
+    from accumcli.stereo import line_span, stretch_ids
 
     truth = read_truth(str(truth_file))
     edge_dir = (truth.b - truth.a) / np.linalg.norm(truth.b - truth.a, axis=1, keepdims=True)
@@ -47,16 +48,14 @@ def pieces(recording: Path, truth_file: Path) -> np.ndarray:
                 continue
             left, right = out.left, out.right
             li, ri = out.left_index[stereo], out.right_index[stereo]
-            stretch = left.line_id[li] * (int(right.line_id.max()) + 1) + right.line_id[ri]
-            _, where, size = np.unique(stretch, return_inverse=True, return_counts=True)
-            spans = [(hi - lo)[side.line_id[index]] for side, index in ((left, li), (right, ri))
-                     for lo, hi in [side.line_extents()]]
+            stretch = stretch_ids(left, right, li, ri)
+            size = np.bincount(stretch)[stretch]                                  # pieces on each one's stretch
             local = out.segments.select(np.flatnonzero(stereo)).transformed(invert(T), "object")
             distances = _point_edge_distance(local.centers, truth.a, truth.b)
             nearest = distances.argmin(axis=1)
             near = distances[np.arange(len(local)), nearest] <= NEAR_M
             error = np.degrees(np.arccos(np.clip(np.abs(np.sum(local.directions * edge_dir[nearest], 1)), 0, 1)))
-            rows.append(np.column_stack([error, size[where.ravel()], np.minimum(*spans)])[near])
+            rows.append(np.column_stack([error, size, np.minimum(line_span(left, li), line_span(right, ri))])[near])
     return np.concatenate(rows) if rows else np.zeros((0, 3))
 
 
