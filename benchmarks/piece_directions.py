@@ -9,6 +9,12 @@ Why: the largest loss of the scoreboard's second table is the edge length matche
 and this says which pieces make it: with an 8 cm baseline at 0.55-0.8 m the two planes of a short
 line meet at a few degrees, so the depth tilt of a piece alone on its stretch is its lines' angle
 error times about ten.
+
+A second table: the disparity error of the same pieces (px: the piece's disparity against the one of
+the point where its centre's viewing ray passes nearest the edge), by the left piece's angle to the
+image rows, against the sigma the piece claims (``sigma_depth_m`` in disparity): is the depth
+uncertainty honest? A piece's disparity comes from where its lines cross a row, so an error across
+the lines of e px moves it by e / sin(angle): near the critical angle that is four to seven times e.
 """
 
 from __future__ import annotations
@@ -25,13 +31,15 @@ from common import ROOT  # noqa: E402
 DEVSET = ROOT.parent / "shared" / "data" / "devset"
 NEAR_M = 0.004
 SPAN_BINS_PX = (0, 15, 25, 40, 10_000)
+ANGLE_BINS_DEG = (0, 12, 20, 30, 50, 91)
 
 
 def pieces(recording: Path, truth_file: Path) -> np.ndarray:
-    """(N, 3): direction error deg, stretch size, line span px of the on-edge non-critical pieces."""
+    """(N, 6): direction error deg, stretch size, line span px, disparity error px, claimed disparity
+    sigma px, the left piece's angle to the image rows deg, of the on-edge non-critical pieces."""
     from accumcli.evaluate import _point_edge_distance
     from accumcli.extract import extract_frame
-    from accumcli.geometry import invert
+    from accumcli.geometry import invert, transform_points
     from accumcli.model_io import read_truth
     from accumcli.recording import Recording
     from accumcli.stereo import line_span, stretch_ids
@@ -55,8 +63,26 @@ def pieces(recording: Path, truth_file: Path) -> np.ndarray:
             nearest = distances.argmin(axis=1)
             near = distances[np.arange(len(local)), nearest] <= NEAR_M
             error = np.degrees(np.arccos(np.clip(np.abs(np.sum(local.directions * edge_dir[nearest], 1)), 0, 1)))
-            rows.append(np.column_stack([error, size, np.minimum(line_span(left, li), line_span(right, ri))])[near])
-    return np.concatenate(rows) if rows else np.zeros((0, 3))
+            camera = out.segments.select(np.flatnonzero(stereo))
+            fB = frame.intrinsics.fx * frame.intrinsics.baseline
+            depth = _depth_on_edge(camera.centers, transform_points(T, truth.a[nearest]),
+                                   transform_points(T, truth.b[nearest]))
+            disparity_error = camera.extra["disparity_px"] - fB / depth
+            claimed = camera.extra["sigma_depth_m"] * fB / camera.centers[:, 2] ** 2
+            angle = np.degrees(np.arcsin(np.clip(np.abs(left.directions[li, 1]), 0, 1)))
+            rows.append(np.column_stack([error, size, np.minimum(line_span(left, li), line_span(right, ri)),
+                                         disparity_error, claimed, angle])[near])
+    return np.concatenate(rows) if rows else np.zeros((0, 6))
+
+
+def _depth_on_edge(centers: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(N,) m: the depth where the viewing ray through each centre (N, 3, camera frame) passes nearest
+    the line of its edge a, b (N, 3, camera frame)."""
+    ray = centers / np.linalg.norm(centers, axis=1, keepdims=True)
+    edge = (b - a) / np.linalg.norm(b - a, axis=1, keepdims=True)
+    cos = np.sum(ray * edge, axis=1)
+    along_ray = (np.sum(ray * a, axis=1) - cos * np.sum(edge * a, axis=1)) / np.maximum(1 - cos ** 2, 1e-12)
+    return along_ray * ray[:, 2]
 
 
 def main() -> int:
@@ -75,6 +101,14 @@ def main() -> int:
         if len(rows):
             span = "any" if hi == SPAN_BINS_PX[-1] and lo == 0 else f"{lo}-{hi}" if hi < SPAN_BINS_PX[-1] else f">= {lo}"
             print(f"| {label} | {span} | {len(rows)} | {np.mean(rows[:, 0] > 10):.2f} | {np.median(rows[:, 0]):.1f} |")
+    print("\n| pieces | angle to the rows deg | count | disparity error px (1.4826 MAD) | 90 % of abs error | "
+          "claimed sigma px (median) |\n|---|---|---|---|---|---|")
+    for label, kind in (("on a stretch of 3+", e[:, 1] >= 3), ("alone or in two", e[:, 1] < 3)):
+        for lo, hi in zip(ANGLE_BINS_DEG, ANGLE_BINS_DEG[1:]):
+            rows = e[kind & (e[:, 5] >= lo) & (e[:, 5] < hi)]
+            if len(rows):
+                print(f"| {label} | {lo}-{hi} | {len(rows)} | {1.4826 * np.median(np.abs(rows[:, 3])):.3f} | "
+                      f"{np.percentile(np.abs(rows[:, 3]), 90):.3f} | {np.median(rows[:, 4]):.3f} |")
     return 0
 
 
