@@ -101,7 +101,7 @@ def main() -> int:
         if len(rows):
             span = "any" if hi == SPAN_BINS_PX[-1] and lo == 0 else f"{lo}-{hi}" if hi < SPAN_BINS_PX[-1] else f">= {lo}"
             print(f"| {label} | {span} | {len(rows)} | {np.mean(rows[:, 0] > 10):.2f} | {np.median(rows[:, 0]):.1f} |")
-    print("\n| pieces | angle to the rows deg | count | disparity error px (1.4826 MAD) | 90 % of abs error | "
+    print("\n| pieces | angle to the rows deg | count | disparity error px (1.4826 x median abs) | 90 % of abs error | "
           "claimed sigma px (median) |\n|---|---|---|---|---|---|")
     for label, kind in (("on a stretch of 3+", e[:, 1] >= 3), ("alone or in two", e[:, 1] < 3)):
         for lo, hi in zip(ANGLE_BINS_DEG, ANGLE_BINS_DEG[1:]):
