@@ -58,12 +58,12 @@ def pieces(recording: Path, truth_file: Path) -> np.ndarray:
             li, ri = out.left_index[stereo], out.right_index[stereo]
             stretch = stretch_ids(left, right, li, ri)
             size = np.bincount(stretch)[stretch]                                  # pieces on each one's stretch
-            local = out.segments.select(np.flatnonzero(stereo)).transformed(invert(T), "object")
+            camera = out.segments.select(np.flatnonzero(stereo))
+            local = camera.transformed(invert(T), "object")
             distances = _point_edge_distance(local.centers, truth.a, truth.b)
             nearest = distances.argmin(axis=1)
             near = distances[np.arange(len(local)), nearest] <= NEAR_M
             error = np.degrees(np.arccos(np.clip(np.abs(np.sum(local.directions * edge_dir[nearest], 1)), 0, 1)))
-            camera = out.segments.select(np.flatnonzero(stereo))
             fB = frame.intrinsics.fx * frame.intrinsics.baseline
             depth = _depth_on_edge(camera.centers, transform_points(T, truth.a[nearest]),
                                    transform_points(T, truth.b[nearest]))
@@ -78,11 +78,12 @@ def pieces(recording: Path, truth_file: Path) -> np.ndarray:
 def _depth_on_edge(centers: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """(N,) m: the depth where the viewing ray through each centre (N, 3, camera frame) passes nearest
     the line of its edge a, b (N, 3, camera frame)."""
+    from accumcli.stereo import nearest_to_rays
+
     ray = centers / np.linalg.norm(centers, axis=1, keepdims=True)
     edge = (b - a) / np.linalg.norm(b - a, axis=1, keepdims=True)
-    cos = np.sum(ray * edge, axis=1)
-    along_ray = (np.sum(ray * a, axis=1) - cos * np.sum(edge * a, axis=1)) / np.maximum(1 - cos ** 2, 1e-12)
-    return along_ray * ray[:, 2]
+    t, _ = nearest_to_rays(a, edge, ray)
+    return np.sum((a + t[:, None] * edge) * ray, axis=1) * ray[:, 2]   # that point's place along the ray
 
 
 def main() -> int:
