@@ -489,6 +489,32 @@ def test_a_time_offset_looks_the_poses_up_that_much_later(small_recording):
     assert not np.allclose(shifted[0].T_camera_object, frames[0].T_camera_object, atol=1e-4)
 
 
+def test_a_dither_adds_one_grey_level_to_a_tenth_of_the_pixels_the_same_each_time(small_recording):
+    """``dither`` (``make suite --repeats``): 0 streams the images as recorded; a seed moves about a tenth
+    of the pixels by one grey level, the same pixels every time it is read, other pixels for another
+    seed, another frame or the other camera."""
+    from accumcli.runs import RecordingOptions
+
+    def images(**kw):
+        with Recording(small_recording, **kw) as rec:
+            return [(f.left.astype(int), f.right.astype(int)) for f in rec.frames(0, 2)]
+
+    plain, again, one, two = images(), images(dither=0), images(dither=1), images(dither=2)
+    assert all(np.array_equal(a, b) for pa, pb in zip(plain, again) for a, b in zip(pa, pb))
+    moved = [[d != p for d, p in zip(dk, pk)] for dk, pk in zip(one, plain)]
+    for (left_pair, right_pair), (dk, pk) in zip(moved, zip(one, plain)):
+        for image, original in zip(dk, pk):
+            assert np.abs(image - original).max() == 1
+        for changed in (left_pair, right_pair):
+            assert 0.07 < changed.mean() < 0.11      # a tenth, less where 0 or 255 clip
+    assert np.mean(moved[0][0] & moved[0][1]) < 0.02        # left and right: other pixels
+    assert np.mean(moved[0][0] & moved[1][0]) < 0.02        # frame 0 and frame 1: other pixels
+    assert np.array_equal(one[0][0], images(dither=1)[0][0])
+    assert not np.array_equal(one[0][0], two[0][0])
+    with pytest.raises(Exception, match="dither"):
+        RecordingOptions(dither=-1)
+
+
 def _as_foxglove_json(source, target) -> None:
     """``source``'s messages written again on the same topics in Foxglove's JSON encoding (snake_case
     fields, times as {"sec", "nsec"}, bytes base64), as Foxglove's SDKs and bridges write them."""

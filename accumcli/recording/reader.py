@@ -268,6 +268,19 @@ def _folder_problem(path: str) -> str:
     return "a folder with neither a rosbag2 bag (metadata.yaml) nor the .bag files of a split ROS 1 bag"
 
 
+DITHER_SHARE = 0.1   # of the pixels that ``dithered`` moves by one grey level
+
+
+def dithered(image: np.ndarray, seed) -> np.ndarray:
+    """(H, W) uint8 ``image`` with a tenth of its pixels (``DITHER_SHARE``), drawn by ``seed`` (anything
+    ``numpy.random.default_rng`` takes), one grey level up or down (clipped to 0..255): a new pattern
+    of noise of 0.3 grey levels RMS, below any camera's, that changes which pixels Canny keeps and
+    every sub-pixel fit a little, as a second recording of the same scene would."""
+    rng = np.random.default_rng(seed)
+    step = np.where(rng.random(image.shape) < DITHER_SHARE, rng.integers(0, 2, image.shape, np.int16) * 2 - 1, 0)
+    return np.clip(image.astype(np.int16) + step, 0, 255).astype(np.uint8)
+
+
 class Recording:
     """A stereo recording opened for streaming. Use as a context manager.
 
@@ -278,12 +291,17 @@ class Recording:
     in the first pass, exact), ``stereo_offset_ns`` the typical left/right
     offset (ns, or None), ``lost_bytes`` the bytes of a truncated or damaged
     file that could not be read.
+
+    ``dither``: 0 streams the images as recorded; another number is the seed of one more noise
+    pattern (``dithered``) added to every rectified image, for robustness studies: ``make suite
+    --repeats`` tells a change's effect from the scatter that one noise pattern of a recording gives.
     """
 
     def __init__(self, path, topics: Topics = Topics(), camera_frame: str = "camera_left",
                  object_frame: str = "gripper", tolerance_ns: int = 1_000_000, require_pose: bool = True,
-                 time_offset_ns: int = 0):
+                 time_offset_ns: int = 0, dither: int = 0):
         self.path = str(path)
+        self.dither = int(dither)
         self.time_offset_ns = int(time_offset_ns)   # poses are looked up this long after an image's stamp
         self.topics = topics
         self.camera_frame = frame_name(camera_frame)
@@ -690,6 +708,8 @@ class Recording:
                     self.undecodable[reason] = self.undecodable.get(reason, 0) + 1
                     continue
                 left, right = rectifier.rectify(left, right)
+                if self.dither:
+                    left, right = dithered(left, (self.dither, index, 0)), dithered(right, (self.dither, index, 1))
                 try:
                     T, problem = self.pose_at(t_ns), None
                 except PoseUnavailable as e:

@@ -45,6 +45,7 @@ class RecordingOptions:
     object_frame: str = "gripper"
     tolerance_ns: int = 1_000_000
     time_offset_ns: int = 0     # poses are looked up this long after an image's stamp (``Recording.pose_at``)
+    dither: int = 0             # the seed of a noise pattern added to every image (``Recording``), 0: none
 
     def __post_init__(self):
         for name, lowest in (("tolerance_ns", 0), ("time_offset_ns", -MAX_OFFSET_NS)):
@@ -52,6 +53,9 @@ class RecordingOptions:
             if not is_whole_number(value) or not lowest <= value <= MAX_OFFSET_NS:
                 raise InputError(f"{name}: expected whole nanoseconds from {lowest} to {MAX_OFFSET_NS}, found {value!r}")
             object.__setattr__(self, name, int(value))
+        if not is_whole_number(self.dither) or self.dither < 0:
+            raise InputError(f"dither: expected a whole number from 0 (none), found {self.dither!r}")
+        object.__setattr__(self, "dither", int(self.dither))
         for name in ("camera_frame", "object_frame"):
             if not isinstance(getattr(self, name), str) or not frame_name(getattr(self, name)):
                 raise InputError(f"{name}: expected a frame name, found {getattr(self, name)!r}")
@@ -62,7 +66,7 @@ class RecordingOptions:
         frame to the object frame must exist (extraction needs none)."""
         return Recording(path, topics=self.topics, camera_frame=self.camera_frame,
                          object_frame=self.object_frame, tolerance_ns=self.tolerance_ns,
-                         require_pose=require_pose, time_offset_ns=self.time_offset_ns)
+                         require_pose=require_pose, time_offset_ns=self.time_offset_ns, dither=self.dither)
 
 
 _RANGE = re.compile(r"^\s*(\d*)\s*:\s*(\d*)\s*$")
