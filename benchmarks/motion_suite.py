@@ -11,6 +11,12 @@ of the repaired poses (``accumulate --poses``) and the share of these verified o
 ('tracked'), and the seconds of the tracked and the gripper runs. Then the median and the worst row.
 Not part of ``make suite`` (a few minutes): ``make motion``.
 
+Each seed is run ``--repeats`` times (4), once as recorded and then with other noise patterns added to
+the images (``Recording``'s ``dither``, as ``make suite --repeats``), and every figure is the mean of
+the runs (the pose errors too); ``exact sd`` is the larger of the standard deviations of the exact
+model's precision and completeness between them. The two models compared are each one draw of that
+scatter: one run's shortfall is the difference of two draws.
+
 What a shortfall means, per row: two reference recordings of the same scene with the same images,
 their poses perturbed per frame (``PERTURBED``) and accumulated with them, give the shortfall of
 poses that are 0.05 deg / 0.1 mm off (``floor``: how far a row moves with no real pose error, the
@@ -21,6 +27,7 @@ shortfall near ``good``'s is the most that refined poses can be expected to give
 
 from __future__ import annotations
 
+import argparse
 import statistics
 import sys
 import time
@@ -35,11 +42,26 @@ NOISE = dict(pose_noise_deg=1.5, pose_noise_m=0.004)
 PERTURBED = {"floor": dict(pose_noise_deg=0.05, pose_noise_m=0.0001), "good": dict(pose_noise_deg=0.3, pose_noise_m=0.001)}
 
 
-def score(seed: int) -> dict:
+def score(seed: int, repeats: int = 1) -> dict:
+    """The figures of ``score_once`` for dithers 0 .. ``repeats`` - 1: precision, completeness and
+    pose errors their means, seconds those of the first run, ``exact_sd`` the exact model's scatter."""
+    import numpy as np
+
+    runs = [score_once(seed, d) for d in range(repeats)]
+    out = dict(runs[0])
+    for key in ("exact", "noisy", "tracked", *PERTURBED, "pose_errors"):
+        out[key] = tuple(np.mean([r[key] for r in runs], axis=0))
+    out["exact_sd"] = float(np.max(np.std([r["exact"] for r in runs], axis=0)))
+    for name in ("tracked", *PERTURBED):
+        out[f"{name}_shortfall"] = max(out["exact"][0] - out[name][0], out["exact"][1] - out[name][1])
+    return out
+
+
+def score_once(seed: int, dither: int = 0) -> dict:
     from accumcli.evaluate import evaluate_model
     from accumcli.model_io import read_truth
     from accumcli.pipeline import AccumulateParams
-    from accumcli.runs import accumulate_recording
+    from accumcli.runs import RecordingOptions, accumulate_recording
 
     exact = recording(f"motion_exact_{seed}", frames=24, seed=seed, scene="random")
     noisy = recording(f"motion_noisy_{seed}", frames=24, seed=seed, scene="random", **NOISE)
@@ -52,13 +74,12 @@ def score(seed: int) -> dict:
     for name, path, motion in runs:
         t0 = time.perf_counter()
         poses = str(repaired) if motion == "tracked" else ()
-        model = accumulate_recording(path, params=AccumulateParams(motion=motion), poses=poses).model
+        model = accumulate_recording(path, params=AccumulateParams(motion=motion), poses=poses,
+                                     options=RecordingOptions(dither=dither)).model
         out[f"{name}_s"] = time.perf_counter() - t0
         e = evaluate_model(model, truth)
         out[name] = (e["precision"], e["completeness"])
     out["pose_errors"] = pose_errors(noisy, repaired, truth)
-    for name in ("tracked", *PERTURBED):
-        out[f"{name}_shortfall"] = max(out["exact"][0] - out[name][0], out["exact"][1] - out[name][1])
     return out
 
 
@@ -81,23 +102,28 @@ def pose_errors(noisy: str, repaired, truth) -> tuple[float, float, float, float
             float(track.tracked().mean()))
 
 
-def main() -> int:
-    rows = {seed: score(seed) for seed in SEEDS}
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=4, help="runs per seed, each with another noise pattern")
+    args = parser.parse_args(argv)
+    if args.repeats < 1:
+        parser.error("--repeats: at least 1")
+    rows = {seed: score(seed, args.repeats) for seed in SEEDS}
     short = ("tracked", *PERTURBED)
     print("| seed | exact | noisy | tracked | shortfall | floor shortfall | good shortfall | recorded deg / mm "
-          "| repaired deg / mm | verified | tracked s | gripper s |\n|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "| repaired deg / mm | verified | exact sd | tracked s | gripper s |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for seed, r in rows.items():
         cells = [f"{r[k][0]:.3f} / {r[k][1]:.3f}" for k in ("exact", "noisy", "tracked")]
         cells += [f"{r[f'{k}_shortfall']:.3f}" for k in short]
         e = r["pose_errors"]
-        cells += [f"{e[0]:.2f} / {e[1]:.2f}", f"{e[2]:.2f} / {e[3]:.2f}", f"{e[4]:.2f}"]
+        cells += [f"{e[0]:.2f} / {e[1]:.2f}", f"{e[2]:.2f} / {e[3]:.2f}", f"{e[4]:.2f}", f"{r['exact_sd']:.3f}"]
         print(f"| {seed} | " + " | ".join(cells) + f" | {r['tracked_s']:.1f} | {r['noisy_s']:.1f} |")
     for label, pick in (("median", statistics.median), ("worst", max)):
         cells = [f"{pick(r[f'{k}_shortfall'] for r in rows.values()):.3f}" for k in short]
         cells += [" / ".join(f"{pick(r['pose_errors'][i] for r in rows.values()):.2f}" for i in pair)
                   for pair in ((0, 1), (2, 3))]
-        print(f"| **{label}** | | | | " + " | ".join(cells) + " | | | |")
-    print()
+        print(f"| **{label}** | | | | " + " | ".join(cells) + " | | | | |")
+    print(f"\n{args.repeats} runs a seed")
     for k in short:
         within = sum(r[f"{k}_shortfall"] <= 0.02 for r in rows.values())
         print(f"{k}: within 0.02 of exact on {within} of {len(rows)} seeds")
