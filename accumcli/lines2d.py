@@ -73,6 +73,7 @@ class LineParams:
     chain_min_support_px: float = 10.0  # chains: a shorter straight chain is not cut at a bend
     piece_min_support_px: float = 8.0   # a piece needs a run of support of this span,
     corner_piece_min_support_px: float = 7.0   # or this one grown to a corner at both ends (at most the above)
+    chain_end_taper_px: float = 2.5   # chains: edge pixels this near a chain's end weigh less in its direction
     detector: str = "chains"
 
 
@@ -401,7 +402,8 @@ def _canonical(directions: np.ndarray) -> np.ndarray:
 
 def local_segments(points: EdgePoints, labels: np.ndarray, params: LineParams,
                    adapt_length: bool = False, line_fit: bool = False,
-                   min_support_px: float = 0.0, corner_min_support_px: float | None = None) -> Segments2D:
+                   min_support_px: float = 0.0, corner_min_support_px: float | None = None,
+                   direction_weight: np.ndarray | None = None) -> Segments2D:
     """Cut every labelled line into local segments (see the module docstring).
 
     Along a line, consecutive supporting pixels (gaps up to ``max_gap_px``,
@@ -417,7 +419,9 @@ def local_segments(points: EdgePoints, labels: np.ndarray, params: LineParams,
     labels that are straight by construction, whose whole fit is steadier than a few pixels'.
     ``corner_min_support_px``: a run that ``_complete_junctions`` grows to a corner at both ends
     needs only this span of pixels, if less than ``min_support_px`` (a run already reaching its
-    corner is not grown, and needs ``min_support_px``).
+    corner is not grown, and needs ``min_support_px``). ``direction_weight``: (M,) the points'
+    weights in their line's direction (its centroid and everything else weigh by magnitude), None:
+    their magnitudes.
     """
     on_line = np.flatnonzero(labels >= 0)
     if len(on_line) == 0:
@@ -425,6 +429,8 @@ def local_segments(points: EdgePoints, labels: np.ndarray, params: LineParams,
     xy, g, mag, labels = points.xy[on_line], points.g[on_line], points.mag[on_line], labels[on_line].astype(np.int64)
     n_lines = int(labels.max()) + 1
     _, line_center, line_dir = _weighted_line_fit(labels, n_lines, xy, mag)
+    if direction_weight is not None:
+        line_dir = _weighted_line_fit(labels, n_lines, xy, direction_weight[on_line])[2]
     line_normal = np.column_stack([-line_dir[:, 1], line_dir[:, 0]])
     t, across, polarity = line_coordinates(np.ascontiguousarray(xy, np.float64), np.ascontiguousarray(g, np.float64),
                                            labels, line_center, line_dir)

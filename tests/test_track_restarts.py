@@ -29,12 +29,12 @@ def dev_steps_model():
 @needs_devset
 def test_frames_whose_refinement_stops_off_the_truth_are_found_by_restarts(dev_steps_model):
     """From frame 27, some of frames 29 to 32 (the object turns up to 8 degrees a frame; which ones
-    moves with the model) end off the truth from the prediction and the last pose; without restarts
-    the tracker says 'lost' there (two or more), with them it tracks more of them, every tracked
-    frame within a degree and 2 mm (the default model, with view planes; frame 30 stays 'lost' with
-    the model of now, as in the whole run of the tracking scoreboard). With 5 Gauss-Newton steps a
-    level, the default before: with the 12 of now frame 29 converges without one, and the restarts
-    change nothing in these frames."""
+    and how many moves with the model) end off the truth from the prediction and the last pose;
+    without restarts the tracker says 'lost' there (one or more: 29 and 30 with the models before
+    the chains' end taper, 30 with it), with them it tracks more of them, every tracked frame within
+    a degree and 2 mm (the default model, with view planes). With 5 Gauss-Newton steps a level, the
+    default before: with the 12 of now frame 29 converges without one, and the restarts change
+    nothing in these frames."""
     model = dev_steps_model
     truth = read_truth(str(DEVSET / "dev_steps_track.truth.json"))
 
@@ -46,7 +46,7 @@ def test_frames_whose_refinement_stops_off_the_truth_are_found_by_restarts(dev_s
         return track.status, errors
 
     status, _ = run(None)
-    assert status[:2] == ["tracked"] * 2 and status[2:6].count("lost") >= 2
+    assert status[:2] == ["tracked"] * 2 and status[2:6].count("lost") >= 1
     without = status.count("tracked")
     status, errors = run(5.0)
     assert status[:2] == ["tracked"] * 2 and status.count("tracked") > without
