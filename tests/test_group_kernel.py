@@ -4,7 +4,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
-from accumcli.group_kernel import group_moments, group_range, link_components
+from accumcli.group_kernel import end_tapered, group_moments, group_range, link_components
 from accumcli.lines2d import dot2
 
 
@@ -31,6 +31,29 @@ def test_group_range_is_each_groups_min_and_max():
     for k in range(30):
         assert lo[k] == values[groups == k].min() and hi[k] == values[groups == k].max()
     assert np.isinf(lo[30:]).all() and (lo[30:] > 0).all() and (hi[30:] < 0).all()
+
+
+def test_end_tapered_equals_the_numpy_taper_bit_for_bit():
+    """Points of 20 lines (and some of none, -1, which keep their magnitude): the weight falls to
+    ``floor`` at a line's end and is the magnitude from ``taper`` - 0.5 inwards, as numpy computes it."""
+    rng = np.random.default_rng(6)
+    index = rng.integers(-1, 20, 3000)
+    x, y, mag = rng.normal(300, 100, 3000), rng.normal(200, 80, 3000), rng.uniform(1, 50, 3000)
+    center = rng.normal(250, 50, (20, 2))
+    angle = rng.uniform(0, np.pi, 20)
+    direction = np.column_stack([np.cos(angle), np.sin(angle)])
+    got = end_tapered(index, x, y, mag, center, direction, 2.5, 0.1)
+    on = index >= 0
+    lab = index[on]
+    t = dot2(np.column_stack([x, y])[on] - center[lab], direction[lab])
+    lo, hi = group_range(lab, 20, t)
+    ref = mag.copy()
+    ref[on] *= np.clip((np.minimum(t - lo[lab], hi[lab] - t) + 0.5) / 2.5, 0.1, 1.0)
+    assert np.array_equal(got, ref)
+    assert np.array_equal(got[~on], mag[~on])
+    at_end = (t == lo[lab]) | (t == hi[lab])
+    assert at_end.sum() == 40 and np.allclose(got[on][at_end], 0.2 * mag[on][at_end])   # (0 + 0.5) / 2.5
+    assert 0 < (got[on] == mag[on]).mean() < 1
 
 
 def test_link_components_number_components_as_scipy_does():
