@@ -208,6 +208,25 @@ def test_extract_writes_one_line_per_frame(small_recording, tmp_path):
     assert json.loads(figures.output)["accuracy_near_object"] > 0.8
 
 
+def test_gradient_blur_reaches_extraction(small_recording, tmp_path):
+    """``--gradient-blur``: the blur before the gradients; less of it keeps more edge detail (more
+    3D segments here), and a value out of its range is refused in one line."""
+    import json
+
+    counts = []
+    for blur in ("1.0", "0.5"):
+        out = tmp_path / f"frames_{blur}.jsonl"
+        result = run("extract", small_recording, "-o", out, "--frames", "1:3", "--gradient-blur", blur)
+        assert result.exit_code == 0, result.output
+        counts.append(sum(len(json.loads(line)["segments"]) for line in out.read_text().splitlines()))
+    default = tmp_path / "frames.jsonl"
+    assert run("extract", small_recording, "-o", default, "--frames", "1:3").exit_code == 0
+    assert sum(len(json.loads(line)["segments"]) for line in default.read_text().splitlines()) == counts[0]
+    assert counts[1] > counts[0]
+    refused = run("extract", small_recording, "-o", tmp_path / "x.jsonl", "--gradient-blur", "-1")
+    assert refused.exit_code != 0 and "gradient-blur" in refused.output
+
+
 def _board_counts(tmp_path, flags, keys):
     """Per flag (None: none): the sums over the chessboard's first two frames of ``accum extract``'s
     counts ``keys``."""

@@ -73,7 +73,7 @@ def test_gradients_are_sobel_of_the_blurred_image_and_canny_on_the_same_integers
     square, _ = rotated_square((0.0, 0.0), 0.03, 25.0, 0.5)
     image = render_pair([square], seed=5).left
     g = Gradients.of(image, LineParams())
-    blurred = cv2.GaussianBlur(image, (0, 0), 1.0)
+    blurred = cv2.GaussianBlur(image, (0, 0), LineParams().blur_sigma)
     dx, dy = cv2.Sobel(blurred, cv2.CV_16S, 1, 0, ksize=3), cv2.Sobel(blurred, cv2.CV_16S, 0, 1, ksize=3)
     assert g.gx.dtype == np.float32 and np.array_equal(g.gx * 8, dx) and np.array_equal(g.gy * 8, dy)
     # extraction's parts are computed on first use only (tracking needs gx, gy alone), then kept
@@ -195,6 +195,30 @@ def _recall_by_edge_length(params, low, high):
     edges = [(a, b) for rect in SHORT_RECTS for a, b in _polygon_edges(_rotated_rect(*rect))
              if low <= np.linalg.norm(b - a) < high]
     return float(np.mean([_edge_recall(segments, a, b)[0] for a, b in edges]))
+
+
+FAINT_RECTS = [((50 + 75 * (i % 4), 45 + 75 * (i // 4)), (40, 30), 7.0 + 21.0 * i) for i in range(12)]
+
+
+def _faint_edge_recall(params, step, seed):
+    """Mean recall of the edges of 40 x 30 px rectangles ``step`` grey levels above their background
+    (optics blur 1.0 px, noise 1.0)."""
+    image = _render([(_rotated_rect(*r), 60.0 + step) for r in FAINT_RECTS], background=60.0, blur=1.0, noise=1.0,
+                    seed=seed)
+    segments = DETECTORS["chains"](image, params)
+    return float(np.mean([_edge_recall(segments, a, b)[0] for r in FAINT_RECTS for a, b in _polygon_edges(_rotated_rect(*r))]))
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_faint_steps_are_found_with_a_light_blur(seed):
+    """Steps of 8 and 10 grey levels under 1 px of optics blur: with 0.5 px of blur before the
+    gradients (``--gradient-blur 0.5``) their gradient peaks clear Canny's threshold and most of their
+    length is found (about 0.6 and 0.8 here); blurred by the default's 1.0 px they peak under it
+    (about 0 and 0.3). Strong steps (18) are found either way."""
+    light, heavy = LineParams(blur_sigma=0.5), LineParams()
+    assert _faint_edge_recall(light, 8, seed) >= 0.4 >= _faint_edge_recall(heavy, 8, seed) + 0.3
+    assert _faint_edge_recall(light, 10, seed) >= 0.7 and _faint_edge_recall(heavy, 10, seed) <= 0.5
+    assert min(_faint_edge_recall(light, 18, seed), _faint_edge_recall(heavy, 18, seed)) >= 0.85
 
 
 def test_pieces_shorter_than_their_chain_minimum_are_kept():

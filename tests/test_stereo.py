@@ -162,7 +162,7 @@ def test_extraction_returns_its_gradients_and_reuses_given_ones():
     again = extract_frame(frame, ExtractParams(), gradients=given)
     assert again.gradients[0] is given[0] and again.gradients[1] is given[1]
     assert np.array_equal(again.segments.centers, first.segments.centers) and len(first.segments) >= 8
-    flat = tuple(type(g)(np.zeros_like(g.gx), np.zeros_like(g.gy), 1.0, 3.0, 1.5) for g in given)
+    flat = tuple(type(g)(np.zeros_like(g.gx), np.zeros_like(g.gy), g.blur_sigma, 3.0, 1.5) for g in given)
     assert len(extract_frame(frame, ExtractParams(), gradients=flat).segments) == 0   # they are used
 
 
