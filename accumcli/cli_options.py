@@ -137,11 +137,10 @@ def extraction_options(func):
                      help="Length of a local segment, pixels."),
         click.option("--gradient-threshold", type=click.FloatRange(0.1, 100.0), default=3.0, show_default=True,
                      help="Edge gradient threshold, grey levels per pixel."),
-        click.option("--gradient-blur", type=click.FloatRange(0.0, 5.0), default=1.0, show_default=True,
+        click.option("--gradient-blur", type=click.FloatRange(0.0, 5.0), default=0.5, show_default=True,
                      metavar="PX",
-                     help="Gaussian blur of the images before their gradients, pixels. 0.5 finds fainter and "
-                          "more crowded edges: on the scoreboard fuller and cleaner models (completeness mean "
-                          "0.62 -> 0.67), but not yet the default (accumcli/lines2d.py)."),
+                     help="Gaussian blur of the images before their gradients, pixels: more smooths noise, less "
+                          "finds fainter and more crowded edges (accumcli/lines2d.py)."),
         click.option("--critical-angle", type=click.FloatRange(0.0, 45.0), default=8.0, show_default=True,
                      help="Segments closer than this to the epipolar direction (degrees) are not matched "
                           "along the rows."),

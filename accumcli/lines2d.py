@@ -31,24 +31,21 @@ line segments ``pieces_on_lines`` cuts into local segments. On the suite (benchm
 (0.92). On the devset's five rows ``lsd`` gave less correct 3D (median 0.26 against 0.30) but a
 higher accumulated precision (0.94 against 0.88); ``ed`` and ``fld`` less of both.
 
-The blur before the gradients (``blur_sigma``, ``--gradient-blur``) is 1.0 px; 0.5 gives fuller and
-cleaner models on the scoreboard but is not the default yet (below). A camera's optics blur its
-images already (0.5 to 1.2 px in the simulator and the devset), and every more pixel of blur flattens
-an edge's gradient peak (a step of h grey levels peaks at about h / (2.5 sigma) grey levels per
-pixel, sigma the optics', the blur's and Sobel's together) and merges neighbouring edges: with 1.0 a
-step of 10 grey levels (the truth counts 6 and more as seen) peaks under Canny's 3 grey levels per
-pixel and is missed on most of its length (``tests/test_lines2d.py``). On ``make suite`` (2026-12-06,
-4 runs a row; precision / completeness means over the 19 rows, rows under a precision of 0.95):
-1.0 0.939 / 0.621, 6 rows; 0.85 0.932 / 0.635, 7 rows; 0.7 0.942 / 0.642, 5 rows; 0.5 0.947 / 0.666,
-3 rows (median 0.975 / 0.673, worst row's completeness 0.269 -> 0.306, single-frame near-object
-precision median 0.761 -> 0.814, the teabox 0.544 / 0.615 against 0.574 / 0.508); 0.3 0.943 / 0.667,
-4 rows (the teabox 0.541 / 0.556). Not the default because of tracking: with the models of 0.5 the
-tracking scoreboard's sim_206 (turned to an aspect its model barely covers) tracks one frame 3.7
-degrees off (a pose carried from three ambiguous frames, 10.7 segments in view), and with either
-rule measured against it (a margin worth 3 segments, 12 segments in view) a re-acquisition two frames
-later tracks the half-turned twin; the tracker must hold that aspect first. fld's and ed's own line
-finding keeps the blur it was measured with (``OPENCV_LINE_BLUR``), tracking its own
-(``TrackParams.blur_sigma``).
+The blur before the gradients (``blur_sigma``, ``--gradient-blur``) is 0.5 px (1.0 until 2026-12-06).
+A camera's optics blur its images already (0.5 to 1.2 px in the simulator and the devset), and
+every more pixel of blur flattens an edge's gradient peak (a step of h grey levels peaks at about
+h / (2.5 sigma) grey levels per pixel, sigma the optics', the blur's and Sobel's together) and
+merges neighbouring edges: with 1.0 a step of 10 grey levels (the truth counts 6 and more as seen)
+peaks under Canny's 3 grey levels per pixel and is missed on most of its length
+(``tests/test_lines2d.py``). On ``make suite`` (2026-12-06, 4 runs a row; precision / completeness
+means over the 19 rows, rows under a precision of 0.95): 1.0 0.939 / 0.621, 6 rows; 0.85 0.932 /
+0.635, 7 rows; 0.7 0.942 / 0.642, 5 rows; 0.5 0.947 / 0.666, 3 rows (median 0.975 / 0.673, worst
+row's completeness 0.269 -> 0.306, single-frame near-object precision median 0.761 -> 0.814, the
+teabox 0.544 / 0.615 against 0.574 / 0.508); 0.3 and 0 0.943 / 0.667, 4 rows (the teabox 0.541 /
+0.556 and 0.533 / 0.569). With Canny's threshold at 3.5 too, 0.949 / 0.665, 3 rows. The support
+rules of ``edge_chains`` and its end taper were set with 1.0 (their tests keep it). fld's and ed's
+own line finding keeps the blur it was measured with (``OPENCV_LINE_BLUR``), tracking its own
+(``TrackParams.blur_sigma``, 1.0).
 
 Pixel coordinates are (u, v) = (column, row), origin at the centre of the
 top-left pixel.
@@ -76,7 +73,7 @@ class LineParams:
     """Parameters of 2D extraction (defaults suit 640x480 8-bit images)."""
 
     segment_length_px: float = 15.0
-    blur_sigma: float = 1.0             # of the image before its gradients, px (module docstring)
+    blur_sigma: float = 0.5             # of the image before its gradients, px (module docstring)
     tensor_sigma: float = 1.5         # smoothing of the structure tensor that orients the votes
     gradient_threshold: float = 3.0   # grey levels per pixel, Canny's high threshold (low = half)
     angle_step_deg: float = 1.0       # Hough normal-angle bin

@@ -184,7 +184,8 @@ class TrackParams:
     max_std_deg: float = 0.84                # of the last Gauss-Newton step, per axis (``_verify``): the pose is
     max_std_mm: float = 2.8                  # determined
     std_scale: float = 1.75                  # the images' standard deviations times this (``_verify``)
-    min_margin: float = 0.1                  # coverage over the best distinct alternative pose, else ambiguous
+    min_margin: float = 0.1                  # coverage over the best distinct alternative pose, else ambiguous,
+    min_margin_segments: float = 3.0         # and at least this many segments in view worth of it (``decide``)
     distinct_deg: float = 3.0                # poses further apart than this (or distinct_m) are alternatives
     distinct_m: float = 0.005
     merge_px: float = 1.0                    # a second start projecting this close to a refined pose joins it
@@ -202,7 +203,7 @@ class TrackParams:
     suspect_is_lost: bool = True             # a frame still suspect after its restarts is 'lost' (``update``)
     rival_slack: float = 0.2                 # an unverified rival's RMS may exceed the limit by this share (decide)
     max_jump_deg: float = 30.0               # a pose this far from the motion prediction is not believed
-    max_jump_m: float = 0.05                 # (while the last tracked frame is at most max_gap_s ago)
+    max_jump_m: float = 0.05                 # (while the last tracked or ambiguous frame is at most max_gap_s ago)
     found_memory: float | None = 0.3         # min_coverage judges a coverage weighed by found rates, taking this
     min_found_rate: float = 0.1              # share of each tracked frame's (None: none), at least this (``PoseTracker``)
     prior_deg: float | None = None           # a Gaussian prior about the start pose per axis (see _gauss_newton);
@@ -983,8 +984,13 @@ def decide(candidates: list[PoseEstimate], params: TrackParams = TrackParams(),
     truth covered 0.53 and 0.56, failed by RMS 0.63 and 0.67 px (limit 0.6) and inlier shares of
     0.87 and 0.88 (0.9). A rival the images fail clearly (a pose showing 0.1 % of the model,
     'covering' 0.72 with an RMS of 0.83 px beside a right restart on dev_steps_track) is none. A
-    verified best whose margin is under ``min_margin`` is 'ambiguous', the rivals within the margin
-    in its ``alternatives`` (a symmetric model, e.g. the chessboard's half turn)."""
+    verified best whose margin is under ``min_margin``, or under ``min_margin_segments`` of its segments
+    in view (``shown_segments``), is 'ambiguous', the rivals within the margin in its ``alternatives``
+    (a symmetric model, e.g. the chessboard's half turn). Why a count too: a share of a few segments
+    is a segment or two, which one edge more or less found decides; sim_206 with the models of
+    ``--gradient-blur 0.5`` verified a pose carried from ambiguous frames 3.7 deg off with 10.7
+    segments in view at a margin of 0.168 (1.8 segments). From 30 segments in view on, ``min_margin``
+    alone decides, as before."""
     finite = [c for c in candidates if np.isfinite(c.T_camera_object).all()]
     if not finite:
         return None
@@ -1001,7 +1007,8 @@ def decide(candidates: list[PoseEstimate], params: TrackParams = TrackParams(),
                                                                for known in [best, *rivals]):
             rivals.append(other)
     best.margin = best.coverage - max((r.coverage for r in rivals), default=0.0)
-    close = [r for r in rivals if best.coverage - r.coverage < params.min_margin]
+    needed = max(params.min_margin, params.min_margin_segments / max(best.shown_segments, 1e-9))
+    close = [r for r in rivals if best.coverage - r.coverage < needed]
     if best.status == "tracked" and close:
         rotation, translation = pose_error(close[0].T_camera_object, best.T_camera_object)
         best.status = "ambiguous"
@@ -1075,6 +1082,7 @@ class PoseTracker:
         self._recent_rms = collections.deque(maxlen=self.params.recent_frames)   # of the last tracked frames, px
         self._recent_coverage = collections.deque(maxlen=self.params.recent_frames)   # of the same frames
         self._undecided: list[np.ndarray] = []   # the poses of the last 'ambiguous' frame, until one is tracked
+        self._undecided_ns: int | None = None    # and its time
 
     def symmetries(self, every_axis: bool = False) -> list[np.ndarray]:
         """The model's near-symmetries: rigid transforms S (4, 4), object frame, more than
@@ -1118,17 +1126,28 @@ class PoseTracker:
         ``max_jump_deg`` or ``max_jump_m`` from both of ``predict``'s poses (constant velocity, and the
         last tracked pose: after a few lost frames constant velocity overshoots an object that turned
         back, and rejected the true pose on dev_steps_track) while the last tracked frame is at most
-        ``max_gap_s`` old. A re-acquisition may find a symmetric twin (a box's half turn) whose image
-        evidence is as good as the true pose's; the motion tells them apart."""
+        ``max_gap_s`` old; and from every pose of the last 'ambiguous' frame while that frame is at most
+        ``max_gap_s`` old (either reference suffices). A re-acquisition may find a symmetric twin (a
+        box's half turn) whose image evidence is as good as the true pose's; the motion tells them
+        apart. Why the ambiguous frame's poses: on the tracking scoreboard, sim_206 with the models of
+        ``--gradient-blur 0.5`` turned to an aspect its model barely covers, was 'ambiguous' in three
+        frames (the truth among the poses) and lost in two, and then re-acquired the half-turned twin
+        at coverage 0.635 with no tracked frame recent enough to refute it."""
         p = self.params
-        if not self.history or (time_ns - self.history[-1][0]) * 1e-9 > p.max_gap_s:
+        references, names = [], []
+        if self.history and (time_ns - self.history[-1][0]) * 1e-9 <= p.max_gap_s:
+            references += self.predict(time_ns) if predicted is None else predicted   # the frame's, computed once
+            names.append("the motion prediction")
+        if self._undecided and (time_ns - self._undecided_ns) * 1e-9 <= p.max_gap_s:
+            references += self._undecided
+            names.append("the last ambiguous frame's poses")
+        if not references:
             return ""
-        predicted = self.predict(time_ns) if predicted is None else predicted   # the frame's, computed once
-        rotation, translation = min((pose_error(estimate.T_camera_object, T) for T in predicted),
+        rotation, translation = min((pose_error(estimate.T_camera_object, T) for T in references),
                                     key=lambda e: max(e[0] / p.max_jump_deg, e[1] / p.max_jump_m))
         if rotation <= p.max_jump_deg and translation <= p.max_jump_m:
             return ""
-        return (f"{rotation:.0f} deg and {translation * 1000:.0f} mm from the motion prediction "
+        return (f"{rotation:.0f} deg and {translation * 1000:.0f} mm from {' and '.join(names)} "
                 f"(at most {p.max_jump_deg:.0f} deg and {p.max_jump_m * 1000:.0f} mm)")
 
     def _restarts(self, judged: list[PoseEstimate], frame: StereoFrame, grads, levels: int | None = None
@@ -1380,6 +1399,7 @@ class PoseTracker:
             self._undecided = []
         elif best.status == "ambiguous":
             self._undecided = [best.T_camera_object] + [T for T, _ in best.alternatives]
+            self._undecided_ns = frame.timestamp_ns
         return best
 
     def _remember_found(self, tracked: PoseEstimate) -> None:

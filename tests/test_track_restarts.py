@@ -10,8 +10,11 @@ import pytest
 
 from scipy.spatial.transform import Rotation
 
+from accumcli.extract import ExtractParams
 from accumcli.geometry import make_transform, pose_error
+from accumcli.lines2d import LineParams
 from accumcli.model_io import read_truth
+from accumcli.pipeline import AccumulateParams
 from accumcli.runs import FrameRange, accumulate_recording, track_recording
 from accumcli.track import TrackParams
 
@@ -21,9 +24,16 @@ DEVSET = Path(__file__).resolve().parents[2] / "shared" / "data" / "devset"
 needs_devset = pytest.mark.skipif(not (DEVSET / "dev_steps_track.mcap").exists(), reason="needs ../shared/data/devset")
 
 
+# Extraction with 1.0 px of blur before the gradients (the default until 2026-12-06), for the model and
+# for the frames' 3D segments that re-acquisition and the 3D support test use: with it frames 29 to 32
+# of dev_steps_track end off the truth without restarts, which the tests below need; with the default
+# 0.5 px only frame 30 is lost there, and restarts do not find it (the tracking scoreboard: 59 of 60).
+BLUR_BEFORE = ExtractParams(lines=LineParams(blur_sigma=1.0))
+
+
 @pytest.fixture(scope="module")
 def dev_steps_model():
-    return accumulate_recording(str(DEVSET / "dev_steps.mcap")).model
+    return accumulate_recording(str(DEVSET / "dev_steps.mcap"), params=AccumulateParams(extract=BLUR_BEFORE)).model
 
 
 @needs_devset
@@ -40,6 +50,7 @@ def test_frames_whose_refinement_stops_off_the_truth_are_found_by_restarts(dev_s
 
     def run(restart_deg):
         track = track_recording(model, str(DEVSET / "dev_steps_track.mcap"), frames=FrameRange(27, 34),
+                                extract_params=BLUR_BEFORE,
                                 params=TrackParams(restart_deg=restart_deg, iterations_per_level=5)).track
         errors = [pose_error(T, truth.pose_at(int(t))) if s == "tracked" else None
                   for t, T, s in zip(track.times_ns, track.poses, track.status)]
@@ -88,7 +99,8 @@ def test_the_frame_after_an_ambiguous_one_restarts(dev_steps_model, monkeypatch)
     monkeypatch.setattr(track_module.PoseTracker, "update", update)
     monkeypatch.setattr(track_module, "decide", decide)
     truth = read_truth(str(DEVSET / "dev_steps_track.truth.json"))
-    track = track_recording(dev_steps_model, str(DEVSET / "dev_steps_track.mcap"), frames=FrameRange(20, 28)).track
+    track = track_recording(dev_steps_model, str(DEVSET / "dev_steps_track.mcap"), frames=FrameRange(20, 28),
+                            extract_params=BLUR_BEFORE).track
     assert track.status[3] == "ambiguous" and 24 in restarted
     assert track.status[5:] == ["tracked"] * 3
     for t, T, s in zip(track.times_ns, track.poses, track.status):
