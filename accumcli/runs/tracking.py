@@ -109,6 +109,7 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
                         model.frame_id, rec.object_frame)
         waited, start_index = [], None   # the frames before the first with a starting pose, and that one's
         with rerun_log(files, rrd, "track") as viz:
+            same_blur = extract_params.lines.blur_sigma == params.blur_sigma
             for frame in rec.frames(frames.start, frames.stop):
                 guess = None
                 if start_index is None:
@@ -118,7 +119,9 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
                     estimate = PoseEstimate(np.full((4, 4), np.nan), float("inf"), 0, 0, "lost",
                                             reason=f"no recorded pose to start from ({frame.pose_problem})")
                 else:
-                    shared = frame_gradients(frame, extract_params.lines)   # tracking and re-acquisition share them
+                    # tracking and re-acquisition share the frame's gradients where their blur is the same;
+                    # else each computes its own, re-acquisition only when it runs
+                    shared = frame_gradients(frame, extract_params.lines) if same_blur else None
                     observe = (lambda f=frame: extract_frame(f, extract_params, rec.camera_frame,
                                                              gradients=shared).segments) if reacquire else None
                     estimate = tracker.update(frame, guess, observe, gradients=shared,
