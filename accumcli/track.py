@@ -1014,7 +1014,7 @@ def decide(candidates: list[PoseEstimate], params: TrackParams = TrackParams(),
         best.status = "ambiguous"
         best.alternatives = [(r.T_camera_object, r.coverage) for r in close]
         best.reason = (f"a pose {rotation:.0f} deg and {translation * 1000:.0f} mm away covers "
-                       f"{close[0].coverage:.2f} (this one {best.coverage:.2f}; margin needs {params.min_margin})")
+                       f"{close[0].coverage:.2f} (this one {best.coverage:.2f}; margin needs {needed:.2f})")
     return best
 
 

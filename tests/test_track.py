@@ -472,6 +472,23 @@ def test_decide_calls_two_equally_good_distinct_poses_ambiguous_and_keeps_both()
     assert decide([_estimate(np.full((4, 4), np.nan), 0.9)]) is None
 
 
+def test_a_margin_must_be_worth_three_segments_in_view():
+    """``min_margin_segments``: with 10.7 segments in view a margin of 0.17 (under two segments) leaves
+    the frame ambiguous (sim_206's frame 27 with the models of 0.5 px verified a pose 3.7 deg off so);
+    with 40 in view the same margin is enough, and from 30 on ``min_margin`` alone decides."""
+    from accumcli.track import decide
+
+    half_turn = make_transform(Rotation.from_rotvec([0, 0, np.pi]).as_matrix(), [0.0, 0.0, 0.5])
+    for shown, status in ((10.7, "ambiguous"), (29.0, "ambiguous"), (40.0, "tracked")):
+        best = _estimate(T_FRONT, 0.80)
+        best.shown_segments = shown
+        decided = decide([best, _estimate(half_turn, 0.698 if shown == 29.0 else 0.63)])   # margins 0.102, 0.17
+        assert decided.status == status, (shown, decided.reason)
+    best = _estimate(T_FRONT, 0.80)
+    best.shown_segments = 10.7
+    assert "margin needs 0.28" in decide([best, _estimate(half_turn, 0.63)]).reason
+
+
 def test_a_restart_must_beat_the_unverified_poses_too():
     """A restart explores where no refinement verified: a distinct pose that the same images cover
     about as well, verified or not, makes it ambiguous (sim_206 frame 26 of the tracking scoreboard
@@ -700,6 +717,25 @@ def test_every_tracked_frame_of_the_track_command_is_right(noisy_pair, tmp_path)
     figures = json.loads(runner.invoke(main, ["eval", str(poses), exact.replace(".mcap", ".truth.json"),
                                               "--json"]).output)
     assert figures["max_rotation_deg"] < 3.0 and figures["max_translation_mm"] < 5.0
+
+
+def test_the_last_ambiguous_frames_poses_hold_a_reacquisition_as_a_prediction_does():
+    """No tracked frame within ``max_gap_s``, but an ambiguous one 0.2 s ago: a re-acquired half turn
+    far from all its poses is implausible (sim_206 re-acquired its twin so), one near any of them is
+    not, and once that frame is older than ``max_gap_s`` the images alone judge."""
+    from accumcli.track import PoseEstimate
+
+    tracker = PoseTracker(_box_model())
+    tracker.history = [(0, T_FRONT), (100_000_000, T_FRONT)]
+    other = perturbed(T_FRONT, 5.0, 0.004)
+    tracker._undecided, tracker._undecided_ns = [T_FRONT, other], 800_000_000
+    half_turn = make_transform(Rotation.from_rotvec([0, 0, np.pi]).as_matrix(), [0.0, 0.0, 0.5])
+    flipped = PoseEstimate(half_turn, 0.3, 200, 210, "tracked", coverage=0.8)
+    why = tracker._implausible(flipped, 1_000_000_000)
+    assert "from the last ambiguous frame's poses" in why and "motion prediction" not in why
+    near_other = PoseEstimate(perturbed(other, 10.0, 0.01), 0.3, 200, 210, "tracked", coverage=0.8)
+    assert tracker._implausible(near_other, 1_000_000_000) == ""
+    assert tracker._implausible(flipped, 1_400_000_000) == ""
 
 
 def test_prediction_scales_the_last_step_by_the_time_since_it():
