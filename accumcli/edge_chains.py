@@ -81,8 +81,8 @@ from .chain_kernel import neighbour_links, straight_chain_labels
 from .group_kernel import end_tapered, link_components
 from .grouping import group_range
 from .pair_kernel import collinear_links
-from .lines2d import (EdgePoints, Gradients, LineParams, Segments2D, StageTimes, _canonical, _weighted_line_fit, dot2,
-                      detection_start, edge_points, local_segments, refine_on_gradient)
+from .lines2d import (EdgePoints, Gradients, LineParams, Segments2D, StageTimes, _canonical, _weighted_line_fit,
+                      detection_start, directed_line_fit, dot2, edge_points, local_segments, refine_on_gradient)
 
 CHAIN_ANGLE_DEG = 20.0        # neighbouring edge pixels link when their gradients differ less than this
 CHAIN_MAX_RESIDUAL_PX = 0.6   # a chain with a point farther than this from its chord is cut there
@@ -121,19 +121,30 @@ def straight_chains(points: EdgePoints, shape: tuple[int, int], max_residual_px:
                                  float(max_residual_px), int(rounds), float(min_length_px))
 
 
+def chain_fits(points: EdgePoints, chains: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(K, 2) centre and (K, 2) unit direction of every straight chain's magnitude-weighted line
+    (``chains``: (M,) label 0..K-1 or -1; K >= 1), which ``collinear_lines`` and
+    ``end_tapered_weights`` both need: fitted once per image."""
+    on = chains >= 0
+    lab = chains[on].astype(np.int64)
+    _, center, direction = _weighted_line_fit(lab, int(lab.max()) + 1, points.xy[on], points.mag[on])
+    return center, direction
+
+
 def collinear_lines(points: EdgePoints, chains: np.ndarray, reach_px: float, max_deg: float = COLLINEAR_DEG,
-                    max_offset_px: float = COLLINEAR_PX) -> np.ndarray:
+                    max_offset_px: float = COLLINEAR_PX, fits: tuple | None = None) -> np.ndarray:
     """(K,) line 0..L-1 of every straight chain (``chains``: (M,) chain label 0..K-1 of every edge
     point, or -1). Chains whose ends lie within ``reach_px`` of each other, whose directions
     agree within ``max_deg`` and whose ends lie within ``max_offset_px`` of the other chain's
     line are one line (transitively), as a Hough line is: a corner, a crossing or a polarity flip
-    interrupts a chain but not the line that stereo matching propagates along."""
+    interrupts a chain but not the line that stereo matching propagates along. ``fits``: the
+    chains' ``chain_fits`` if already computed."""
     on = chains >= 0
     if not on.any():
         return np.zeros(0, np.int64)
     lab, xy = chains[on].astype(np.int64), points.xy[on]
     n = int(lab.max()) + 1
-    _, center, direction = _weighted_line_fit(lab, n, xy, points.mag[on])
+    center, direction = fits if fits is not None else chain_fits(points, chains)
     t = dot2(xy - center[lab], direction[lab])
     t_lo, t_hi = group_range(lab, n, t)
     ends = np.concatenate([center + t_lo[:, None] * direction, center + t_hi[:, None] * direction])
@@ -143,17 +154,17 @@ def collinear_lines(points: EdgePoints, chains: np.ndarray, reach_px: float, max
     return link_components(n, np.ascontiguousarray(links, np.int64))
 
 
-def end_tapered_weights(points: EdgePoints, chains: np.ndarray, taper_px: float) -> np.ndarray:
+def end_tapered_weights(points: EdgePoints, chains: np.ndarray, taper_px: float, fits: tuple | None = None
+                        ) -> np.ndarray:
     """(M,) the edge points' magnitudes, those within ``taper_px`` of their straight chain's nearer end
     (``chains``: (M,) label or -1) scaled by (d + 0.5) / ``taper_px`` at d px from it (at least
     ``END_TAPER_FLOOR``): the weights that orient a chain's line (module docstring). Compiled
-    (``group_kernel.end_tapered``): a dozen whole-array calls took a tenth of the chains' time."""
+    (``group_kernel.end_tapered``): a dozen whole-array calls took a tenth of the chains' time.
+    ``fits``: the chains' ``chain_fits`` if already computed."""
     if taper_px <= 0 or not (chains >= 0).any():
         return points.mag.copy()
-    label = np.ascontiguousarray(chains, np.int64)
-    on = label >= 0
-    _, center, direction = _weighted_line_fit(label[on], int(label.max()) + 1, points.xy[on], points.mag[on])
-    return end_tapered(label, np.ascontiguousarray(points.xy[:, 0], np.float64),
+    center, direction = fits if fits is not None else chain_fits(points, chains)
+    return end_tapered(np.ascontiguousarray(chains, np.int64), np.ascontiguousarray(points.xy[:, 0], np.float64),
                        np.ascontiguousarray(points.xy[:, 1], np.float64), np.ascontiguousarray(points.mag, np.float64),
                        center, direction, float(taper_px), END_TAPER_FLOOR)
 
@@ -166,8 +177,8 @@ def _on_lines(segments: Segments2D, points: EdgePoints, chains: np.ndarray, line
         return segments
     on = chains >= 0
     line = line_of_chain[chains[on]]
-    _, center, _ = _weighted_line_fit(line, int(line.max()) + 1, points.xy[on], points.mag[on])
-    direction = _weighted_line_fit(line, int(line.max()) + 1, points.xy[on], direction_weight[on])[2]
+    _, center, direction = directed_line_fit(line, int(line.max()) + 1, points.xy[on], points.mag[on],
+                                             direction_weight[on])
     line_id = line_of_chain[segments.line_id]
     direction = _canonical(direction[line_id])
     t = dot2(segments.centers - center[line_id], direction)
@@ -181,8 +192,9 @@ def detect_chains(image: np.ndarray, params: LineParams, grad: Gradients | None 
     grad, times, t0 = detection_start(image, params, grad, times)
     points = edge_points(grad, with_phi=False)
     chains = straight_chains(points, image.shape, min_length_px=params.chain_min_support_px)
-    line_of_chain = collinear_lines(points, chains, 2 * params.junction_radius_px)
-    direction_weight = end_tapered_weights(points, chains, params.chain_end_taper_px)
+    fits = chain_fits(points, chains) if (chains >= 0).any() else None
+    line_of_chain = collinear_lines(points, chains, 2 * params.junction_radius_px, fits=fits)
+    direction_weight = end_tapered_weights(points, chains, params.chain_end_taper_px, fits=fits)
     t0 = times.add("lines", t0)  # the line-finding stage (whatever the detector), for comparable breakdowns
     segments = local_segments(points, chains, params, adapt_length=True, line_fit=True,
                               min_support_px=params.piece_min_support_px,

@@ -404,6 +404,17 @@ def _weighted_line_fit(index: np.ndarray, n_groups: int, xy: np.ndarray, w: np.n
     return sw, np.column_stack([mx, my]), np.column_stack([np.cos(angle), np.sin(angle)])
 
 
+def directed_line_fit(index: np.ndarray, n_groups: int, xy: np.ndarray, w: np.ndarray,
+                      direction_weight: np.ndarray | None):
+    """``_weighted_line_fit`` by ``w``, its direction fitted by ``direction_weight`` instead (None: by
+    ``w``): the centroid is every pixel's, the direction leans less on the pixels a caller distrusts
+    (``edge_chains.end_tapered_weights``)."""
+    sw, center, direction = _weighted_line_fit(index, n_groups, xy, w)
+    if direction_weight is not None:
+        direction = _weighted_line_fit(index, n_groups, xy, direction_weight)[2]
+    return sw, center, direction
+
+
 def dot2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise dot products of (N, 2) arrays: ``np.sum(a * b, axis=1)`` bit for bit, without its
     (N, 2) temporary and short-axis reduction (several times faster)."""
@@ -444,9 +455,8 @@ def local_segments(points: EdgePoints, labels: np.ndarray, params: LineParams,
         return _empty()
     xy, g, mag, labels = points.xy[on_line], points.g[on_line], points.mag[on_line], labels[on_line].astype(np.int64)
     n_lines = int(labels.max()) + 1
-    _, line_center, line_dir = _weighted_line_fit(labels, n_lines, xy, mag)
-    if direction_weight is not None:
-        line_dir = _weighted_line_fit(labels, n_lines, xy, direction_weight[on_line])[2]
+    _, line_center, line_dir = directed_line_fit(labels, n_lines, xy, mag,
+                                                 None if direction_weight is None else direction_weight[on_line])
     line_normal = np.column_stack([-line_dir[:, 1], line_dir[:, 0]])
     t, across, polarity = line_coordinates(np.ascontiguousarray(xy, np.float64), np.ascontiguousarray(g, np.float64),
                                            labels, line_center, line_dir)
