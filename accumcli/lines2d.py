@@ -63,7 +63,7 @@ import numpy as np
 from .errors import InputError
 from .grouping import group_range
 from .chain_kernel import line_order
-from .group_kernel import group_moments, line_coordinates, magnitude as magnitude_image
+from .group_kernel import group_moments, line_coordinates, magnitude as magnitude_image, piece_groups, supporting_runs
 from .profile_kernel import cut_grid, cut_peaks
 from .pair_kernel import junction_growth
 
@@ -192,7 +192,7 @@ class Gradients:
     @cached_property
     def gxy(self) -> np.ndarray:
         """(H, W, 2) float32: gx and gy as the two channels of one image, so that one bilinear
-        lookup (``sample``) reads both (tracking samples them at every iteration)."""
+        lookup (``sample``) reads both."""
         return cv2.merge([self.gx, self.gy])
 
     @cached_property
@@ -462,17 +462,9 @@ def local_segments(points: EdgePoints, labels: np.ndarray, params: LineParams,
                                            labels, line_center, line_dir)
     keep = np.flatnonzero(np.abs(across) <= params.max_line_distance_px)
     order = keep[line_order(labels[keep], polarity[keep], t[keep])]   # = np.lexsort((t, polarity, labels)) of those kept
-    xy, mag, labels, t, polarity = xy[order], mag[order], labels[order], t[order], polarity[order]
     # runs of supporting pixels
     L = params.segment_length_px
-    brk = np.ones(len(t), bool)
-    brk[1:] = (labels[1:] != labels[:-1]) | (polarity[1:] != polarity[:-1]) | (np.diff(t) > params.max_gap_px)
-    run = np.cumsum(brk) - 1
-    n_runs = int(run[-1]) + 1
-    t_lo = t[brk]                                   # t ascends within a run
-    t_hi = t[np.r_[np.flatnonzero(brk)[1:], len(t)] - 1]
-    run_line = labels[brk]
-    count_run = np.bincount(run, minlength=n_runs)
+    run, t_lo, t_hi, run_line, count_run = supporting_runs(order, labels, polarity, t, float(params.max_gap_px))
     fill = count_run / ((t_hi - t_lo + 1.0) * np.max(np.abs(line_dir[run_line]), axis=1))
     support = t_hi - t_lo + 1.0
     # a run without the fill or the support gives no piece whatever it grows: its growth is not needed
@@ -496,27 +488,18 @@ def local_segments(points: EdgePoints, labels: np.ndarray, params: LineParams,
     else:
         first_center = t_lo + np.minimum(L, run_length) / 2 - 0.5
         spacing = np.where(pieces > 1, (run_length - L) / np.maximum(pieces - 1, 1), 0.0)
-    piece = np.clip(np.round((t - first_center[run]) / np.where(spacing[run] > 0, spacing[run], 1.0)), 0,
-                    np.maximum(pieces[run] - 1, 0)).astype(np.int64)
-    has_piece = pieces[run] > 0
-    first_piece = np.cumsum(pieces) - pieces
-    group = (first_piece[run] + piece)[has_piece]
-    n_groups = int(pieces.sum())
+    group, sw, swt, count, group_run, first = piece_groups(order, run, t, mag, first_center, spacing, pieces)
+    n_groups = len(sw)
     if n_groups == 0:
         return _empty()
-    xy_k, mag_k, line_k = xy[has_piece], mag[has_piece], labels[has_piece]
-    sw, centers, directions = _weighted_line_fit(group, n_groups, xy_k, mag_k)
-    count = np.bincount(group, minlength=n_groups)
-    group_line = np.zeros(n_groups, np.int64)
-    group_line[group] = line_k
-    group_polarity = np.zeros(n_groups, np.int64)
-    group_polarity[group] = polarity[has_piece]
-    group_run = np.zeros(n_groups, np.int64)
-    group_run[group] = run[has_piece]
+    group_line, group_polarity = labels[first], polarity[first]
     if line_fit:
-        t_mean = np.bincount(group, mag_k * t[has_piece], n_groups) / np.maximum(sw, 1e-12)
+        t_mean = swt / np.maximum(sw, 1e-12)
         directions = line_dir[group_line]
         centers = line_center[group_line] + t_mean[:, None] * directions
+    else:
+        members = order[group >= 0]
+        _, centers, directions = _weighted_line_fit(group[group >= 0], n_groups, xy[members], mag[members])
     agree = np.abs(dot2(directions, line_dir[group_line])) >= np.cos(
         np.radians(2 * params.vote_window_deg))
     ok = (count >= 3) & agree

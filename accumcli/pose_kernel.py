@@ -1,10 +1,14 @@
-"""The tracker's Gauss-Newton normal equations over both images, compiled (numba).
+"""The tracker's Gauss-Newton normal equations over both images, and the visibility, sampling,
+projection and residuals around them, compiled (numba).
 
 Why compiled: one iteration projects the samples into both images, picks each sample's nearest
 edge candidate along its normal, and sums the Tukey-weighted Jacobian products; in numpy that was
 some forty small array operations per iteration, about a third of the tracking time, for arithmetic
 that is one pass over the samples. This is the same arithmetic as ``track._residuals`` and
-``track._jacobian`` (which verification still uses), summed in one loop.
+``track._jacobian`` (which verification still uses), summed in one loop. The others replace numpy
+forms of some thirty small array operations per call each, run at every level and verification:
+with them ``make bench``'s tracking went from 24.4 to 30 frames/s, the poses bit for bit the same
+(tests/test_pose_kernel.py compares them with the numpy forms).
 """
 
 from __future__ import annotations
@@ -57,3 +61,111 @@ def normal_equations(P, pivot, uv0, normal, candidates, expected, fx, fy, cx, cy
     for i in range(6):
         H[i, i] += 1e-6
     return H, g, found, swr2, sw
+
+
+@kernel
+def in_view(centers, directions, lengths, R, t, camera, view_direction, view_spread_deg, cones, fx, fy, cx, cy,
+            baseline, width, height, margin_px, min_depth_m, margin_deg):  # pragma: no cover
+    """Per model segment (``centers``, unit ``directions`` (N, 3), ``lengths`` (N,), object frame) at the
+    pose R (3, 3), t (3,) (T_camera_object; ``camera`` (3,) its centre in the object frame): whether
+    both endpoints lie deeper than ``min_depth_m`` and ``margin_px`` inside both images and, with
+    ``cones``, the direction to the camera lies within ``margin_deg`` of its cone of views
+    (``view_direction`` (N, 3), ``view_spread_deg`` (N,)); and the degrees beyond the cone (N,).
+    ``track._in_view`` in one pass: numpy took some thirty array operations per call, and the tracker
+    calls it at every Gauss-Newton level and verification (a sixth of its time)."""
+    n = len(centers)
+    keep = np.zeros(n, np.bool_)
+    beyond = np.zeros(n)
+    for k in range(n):
+        ok = True
+        half = lengths[k] / 2
+        for sign in (-1.0, 1.0):     # the endpoints as ``Segments.endpoints`` computes them
+            p0 = centers[k, 0] + sign * (half * directions[k, 0])
+            p1 = centers[k, 1] + sign * (half * directions[k, 1])
+            p2 = centers[k, 2] + sign * (half * directions[k, 2])
+            x = R[0, 0] * p0 + R[0, 1] * p1 + R[0, 2] * p2 + t[0]
+            y = R[1, 0] * p0 + R[1, 1] * p1 + R[1, 2] * p2 + t[1]
+            z = R[2, 0] * p0 + R[2, 1] * p1 + R[2, 2] * p2 + t[2]
+            if not z > min_depth_m:
+                ok = False
+                break
+            u, v = fx * x / z + cx, fy * y / z + cy
+            ur = u - fx * baseline / z
+            if not (margin_px <= v <= height - 1 - margin_px and margin_px <= u <= width - 1 - margin_px
+                    and margin_px <= ur <= width - 1 - margin_px):
+                ok = False
+                break
+        if cones:
+            a0, a1, a2 = camera[0] - centers[k, 0], camera[1] - centers[k, 1], camera[2] - centers[k, 2]
+            norm = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+            a0, a1, a2 = a0 / norm, a1 / norm, a2 / norm
+            cosine = a0 * view_direction[k, 0] + a1 * view_direction[k, 1] + a2 * view_direction[k, 2]
+            beyond[k] = np.degrees(np.arccos(min(max(cosine, -1.0), 1.0))) - view_spread_deg[k]
+            ok = ok and beyond[k] <= margin_deg
+        keep[k] = ok
+    return keep, beyond
+
+
+@kernel
+def sample_points(centers, directions, lengths, keep, per_segment):  # pragma: no cover
+    """``per_segment`` points (S, 3) evenly along each kept segment (``keep`` (N,) bool; ``centers``,
+    unit ``directions`` (N, 3), ``lengths`` (N,)), their directions (S, 3) and their segment (S,), an
+    index among the kept ones: the samples the tracker fits and verifies with."""
+    kept = np.flatnonzero(keep)
+    m = len(kept) * per_segment
+    points, dirs, owner = np.empty((m, 3)), np.empty((m, 3)), np.empty(m, np.int64)
+    for i in range(len(kept)):
+        k = kept[i]
+        for j in range(per_segment):
+            along = ((j + 0.5) / per_segment - 0.5) * lengths[k]
+            row = i * per_segment + j
+            for c in range(3):
+                points[row, c] = centers[k, c] + along * directions[k, c]
+                dirs[row, c] = directions[k, c]
+            owner[row] = i
+    return points, dirs, owner
+
+
+@kernel
+def projected_normals(points, dirs, fx, fy, cx, cy, baseline, step_m):  # pragma: no cover
+    """Per image side (0 left, 1 right): the projections uv (2, S, 2) of the camera-frame ``points``
+    (S, 3) and the unit normals (2, S, 2) of their projected directions (``dirs`` (S, 3), taken as
+    the projection of the point ``step_m`` along them), rotated (-dv, du): ``track._measure``'s
+    geometry, bit for bit, in one pass."""
+    s = len(points)
+    uv, normal = np.empty((2, s, 2)), np.empty((2, s, 2))
+    for i in range(s):
+        x, y, z = points[i, 0], points[i, 1], points[i, 2]
+        x2, y2, z2 = x + step_m * dirs[i, 0], y + step_m * dirs[i, 1], z + step_m * dirs[i, 2]
+        u, v, d = fx * x / z + cx, fy * y / z + cy, fx * baseline / z
+        u2, v2, d2 = fx * x2 / z2 + cx, fy * y2 / z2 + cy, fx * baseline / z2
+        for side in range(2):
+            a, b = (u, u2) if side == 0 else (u - d, u2 - d2)
+            uv[side, i, 0], uv[side, i, 1] = a, v
+            du, dv = b - a, v2 - v
+            norm = max(np.sqrt(du * du + dv * dv), 1e-9)
+            normal[side, i, 0], normal[side, i, 1] = -(dv / norm), du / norm
+    return uv, normal
+
+
+@kernel
+def nearest_residuals(P, uv0, normal, candidates, fx, fy, cx, cy, baseline):  # pragma: no cover
+    """Per image side (0 left, 1 right): the signed distance (2, S) from each camera-frame point's
+    (``P`` (S, 3)) projection, along its ``normal`` (2, S, 2) since it was measured at ``uv0``
+    (2, S, 2), to its nearest ``candidates`` (2, S, C) edge (the first of equals; NaN where it has
+    none): ``track._residuals``, bit for bit, in one pass."""
+    s_count = P.shape[0]
+    out = np.full((2, s_count), np.nan)
+    for side in range(2):
+        for s in range(s_count):
+            z = P[s, 2]
+            u, v = fx * P[s, 0] / z + cx, fy * P[s, 1] / z + cy
+            if side == 1:
+                u = u - fx * baseline / z
+            moved = (u - uv0[side, s, 0]) * normal[side, s, 0] + (v - uv0[side, s, 1]) * normal[side, s, 1]
+            best = np.inf
+            for c in range(candidates.shape[2]):
+                gap = moved - candidates[side, s, c]
+                if abs(gap) < best:
+                    best, out[side, s] = abs(gap), gap
+    return out

@@ -142,11 +142,11 @@ from scipy.spatial.transform import Rotation
 from .geometry import (check_points, check_transform, extrapolate, invert, make_transform, orthonormalized, pose_error,
                        quat_from_transform, rotate_vectors, rotation_about_point, transform_points)
 from .edge_search import edge_candidates
-from .pose_kernel import normal_equations
+from .pose_kernel import in_view, nearest_residuals, normal_equations, projected_normals, sample_points
 from .lines2d import Gradients, LineParams, frame_gradients
 from .recording import StereoFrame, StereoIntrinsics
 from .segments import Segments
-from .visibility import segments_in_both_images
+from .visibility import IMAGE_MARGIN_PX, MIN_DEPTH_M, segments_in_both_images
 
 
 @dataclass(frozen=True)
@@ -272,15 +272,6 @@ def _pose_fields(T: np.ndarray) -> dict:
             "rotation_xyzw": [round(float(v), 9) for v in quat]}
 
 
-def model_samples(model: Segments, per_segment: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Points (S, 3) along the model's segments (object frame), their directions (S, 3) and segment (S,)."""
-    s = (np.arange(per_segment) + 0.5) / per_segment - 0.5
-    along = s[None, :, None] * model.lengths[:, None, None]
-    points = model.centers[:, None, :] + along * model.directions[:, None, :]
-    owner = np.repeat(np.arange(len(model)), per_segment)
-    return points.reshape(-1, 3), np.repeat(model.directions, per_segment, axis=0), owner
-
-
 def visible(model: Segments, T_camera_object: np.ndarray, intr: StereoIntrinsics, margin_deg: float) -> np.ndarray:
     """(N,) bool: model segments in both images (``visibility.segments_in_both_images``) and (if
     the model has ``view_direction`` and ``view_spread_deg``) seen from within their cone of views
@@ -288,13 +279,23 @@ def visible(model: Segments, T_camera_object: np.ndarray, intr: StereoIntrinsics
     return _in_view(model, T_camera_object, intr, margin_deg)[0]
 
 
-def _in_view(model: Segments, T_camera_object: np.ndarray, intr: StereoIntrinsics, margin_deg: float):
-    """``visible``'s mask (N,) and ``_beyond_cone_deg`` (N,) (None without cones), computed once."""
-    ok = segments_in_both_images(model, T_camera_object, intr)
-    beyond = _beyond_cone_deg(model, T_camera_object)
-    if beyond is not None:
-        ok &= beyond <= margin_deg
-    return ok, beyond
+def _in_view(model: Segments, T_camera_object: np.ndarray, intr: StereoIntrinsics, margin_deg: float | None):
+    """``visible``'s mask (N,) and ``_beyond_cone_deg`` (N,) (None without cones, or ``margin_deg`` None:
+    ``segments_in_both_images`` only), computed once (``pose_kernel.in_view``: both in one pass)."""
+    x = model.extra
+    cones = "view_direction" in x and "view_spread_deg" in x and margin_deg is not None
+    T = np.asarray(T_camera_object, np.float64)
+    empty = np.zeros((0, 3))
+    ok, beyond = in_view(np.ascontiguousarray(model.centers, np.float64),
+                         np.ascontiguousarray(model.directions, np.float64),
+                         np.ascontiguousarray(model.lengths, np.float64), np.ascontiguousarray(T[:3, :3]),
+                         np.ascontiguousarray(T[:3, 3]), invert(T)[:3, 3],
+                         np.ascontiguousarray(x["view_direction"], np.float64) if cones else empty,
+                         np.ascontiguousarray(x["view_spread_deg"], np.float64) if cones else np.zeros(0), cones,
+                         float(intr.fx), float(intr.fy), float(intr.cx), float(intr.cy), float(intr.baseline),
+                         int(intr.width), int(intr.height), IMAGE_MARGIN_PX, MIN_DEPTH_M,
+                         float(margin_deg) if cones else 0.0)
+    return ok, (beyond if cones else None)
 
 
 def _beyond_cone_deg(model: Segments, T_camera_object: np.ndarray) -> np.ndarray | None:
@@ -336,34 +337,25 @@ def _measure(points_cam, dirs_cam, intr: StereoIntrinsics, grads: tuple, search:
     (polarity-free, orientation within ``min_orientation_cos``), each to sub-pixel precision
     (``edge_search.edge_candidates``)."""
     out = []
-    projected = intr.project(points_cam)[:2], intr.project(points_cam + 0.002 * dirs_cam)[:2]
+    uv, normal = projected_normals(np.ascontiguousarray(points_cam, np.float64), np.ascontiguousarray(dirs_cam, np.float64),
+                                   float(intr.fx), float(intr.fy), float(intr.cx), float(intr.cy),
+                                   float(intr.baseline), 0.002)
     for side, grad in enumerate(grads):
-        uv = projected[0][side]
-        d = projected[1][side] - uv
-        d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
-        normal = np.column_stack([-d[:, 1], d[:, 0]])
-        candidates = edge_candidates(grad.gxy, np.ascontiguousarray(uv), normal, int(np.ceil(search)),
+        candidates = edge_candidates(grad.gx, grad.gy, uv[side], normal[side], int(np.ceil(search)),
                                      float(params.min_gradient), float(params.min_orientation_cos), int(params.candidates))
-        out.append((uv, normal, candidates))
+        out.append((uv[side], normal[side], candidates))
     return out
 
 
 def _residuals(P, measurements, intr: StereoIntrinsics):
     """Per image: (signed distance (S,) from each point's current projection to its nearest
-    candidate edge along the normal, has-candidate mask (S,), normal (S, 2))."""
-    out = []
-    projected = intr.project(P)
-    for side, (uv0, normal, candidates) in enumerate(measurements):
-        uv = projected[side]
-        moved = np.sum((uv - uv0) * normal, axis=1)                       # along the normal since measuring
-        gaps = moved[:, None] - candidates
-        distance = np.abs(gaps)
-        distance[np.isnan(distance)] = np.inf
-        nearest = np.argmin(distance, axis=1)[:, None]
-        r = np.take_along_axis(gaps, nearest, axis=1)[:, 0]
-        found = ~np.isnan(r)
-        out.append((np.where(found, r, 0.0), found, normal))
-    return out
+    candidate edge along the normal, has-candidate mask (S,), normal (S, 2))
+    (``pose_kernel.nearest_residuals``)."""
+    uv0, normal, candidates = (np.ascontiguousarray(np.stack(m)) for m in zip(*measurements))
+    r = nearest_residuals(np.ascontiguousarray(P, np.float64), uv0, normal, candidates, float(intr.fx), float(intr.fy),
+                          float(intr.cx), float(intr.cy), float(intr.baseline))
+    found = ~np.isnan(r)
+    return [(np.where(found[side], r[side], 0.0), found[side], measurements[side][1]) for side in (0, 1)]
 
 
 def _jacobian(points_cam: np.ndarray, normal: np.ndarray, intr: StereoIntrinsics, side: int,
@@ -479,7 +471,9 @@ def _samples_in_view(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, 
     if keep.sum() < 3:
         return None
     per_segment = per_segment or params.samples_per_segment
-    points, dirs, owner = model_samples(accepted.select(keep), per_segment)
+    points, dirs, owner = sample_points(np.ascontiguousarray(accepted.centers, np.float64),
+                                        np.ascontiguousarray(accepted.directions, np.float64),
+                                        np.ascontiguousarray(accepted.lengths, np.float64), keep, int(per_segment))
     weights = _ramp(None if beyond is None else beyond[keep], int(keep.sum()), params.expect_ramp_deg)
     return points, dirs, weights[owner], owner, np.flatnonzero(keep)
 
@@ -522,7 +516,7 @@ def _gauss_newton(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, gra
     uv0, normal, candidates = (np.ascontiguousarray(np.stack(m)) for m in zip(*measurements))
     for _ in range(params.iterations_per_level):
         P = transform_points(T, points_obj)
-        pivot = P.mean(axis=0)  # rotating about the object, not the camera, decouples the increments
+        pivot = P.sum(axis=0) / len(P)  # (= P.mean(axis=0), without its wrapper) rotating about the object, not the camera, decouples the increments
         # expected: a segment beyond its cone of views pulls less (expected_weights)
         H, g, found, swr2, sw = normal_equations(P, pivot, uv0, normal, candidates, expected, intr.fx, intr.fy,
                                                  intr.cx, intr.cy, intr.baseline, float(tukey))
@@ -551,7 +545,7 @@ def _perturbed(T: np.ndarray, angle: float) -> list[np.ndarray]:
 def _image_gap(accepted: Segments, A: np.ndarray, B: np.ndarray, intr: StereoIntrinsics) -> float:
     """Mean distance, px, between the projections at poses ``A`` and ``B`` (T_camera_object) of the
     segment centres in view at ``A``, over both images (inf when none is in view)."""
-    keep = segments_in_both_images(accepted, A, intr)
+    keep = _in_view(accepted, A, intr, None)[0]
     if not keep.any():
         return float("inf")
     centers = accepted.centers[keep]
@@ -622,7 +616,7 @@ def _verify(T: np.ndarray, points_obj: np.ndarray, measurements, intr: StereoInt
     tails are heavier). The limits are scaled with it (0.48 deg and 1.6 mm before), so that the
     verification is the same."""
     P = transform_points(T, points_obj)
-    pivot = P.mean(axis=0)
+    pivot = P.sum(axis=0) / len(P)
     per_side = _residuals(P, measurements, intr)
     near = [found & (np.abs(r) <= params.inlier_px) for r, found, _ in per_side]
     both = near[0] & near[1]
@@ -672,8 +666,9 @@ def _clustered_variance(H_inv: np.ndarray, J: np.ndarray, weighted_residual: np.
     with ``M`` the sum over clusters (K,) of ``g g^T``, ``g`` a cluster's sum of ``J_i w_i r_i``,
     times K / (K - 6); zeros with 6 clusters or fewer. Rows (J (R, 6), ``weighted_residual`` (R,))
     of one cluster share its error, e.g. the samples of one model segment."""
-    g = np.zeros((int(cluster.max(initial=-1)) + 1, 6))
-    np.add.at(g, cluster, J * weighted_residual[:, None])
+    n = int(cluster.max(initial=-1)) + 1
+    terms = J * weighted_residual[:, None]     # summed per cluster in row order, as np.add.at would, 3x faster
+    g = np.stack([np.bincount(cluster, weights=terms[:, c], minlength=n) for c in range(6)], axis=1)
     k = int(np.count_nonzero(np.any(g != 0, axis=1)))
     if k <= 6:
         return np.zeros(6)

@@ -91,3 +91,41 @@ def test_line_coordinates_place_points_along_and_across_their_line():
     assert np.allclose(t, [3, 5]) and np.allclose(across, [2, -1]) and list(polarity) == [1, 1]
     t, across, polarity = line_coordinates(xy, -g, np.array([0, 1]), center, direction)
     assert list(polarity) == [-1, -1]
+
+
+def test_supporting_runs_and_piece_groups_equal_the_numpy_runs_and_bincounts_bit_for_bit():
+    """Points of 12 lines, both polarities, with gaps: the runs (a new one where the line or the
+    polarity changes or t steps more than the gap) and the pieces' sums, as ``local_segments``
+    computed them with numpy before (a reordering, np.diff, np.cumsum, np.bincount)."""
+    from accumcli.group_kernel import piece_groups, supporting_runs
+
+    rng = np.random.default_rng(8)
+    m = 4000
+    labels, polarity = rng.integers(0, 12, m), rng.choice([-1, 1], m)
+    t = np.round(rng.uniform(0, 80, m), 1)
+    mag = rng.uniform(1, 40, m)
+    order = np.lexsort((t, polarity, labels))[100:]            # some points dropped, as the across-check does
+    run, t_lo, t_hi, line, count = supporting_runs(order, labels, polarity, t, 3.0)
+    ts, ls, ps = t[order], labels[order], polarity[order]
+    brk = np.ones(len(ts), bool)
+    brk[1:] = (ls[1:] != ls[:-1]) | (ps[1:] != ps[:-1]) | (np.diff(ts) > 3.0)
+    ref_run = np.cumsum(brk) - 1
+    assert np.array_equal(run, ref_run) and np.array_equal(t_lo, ts[brk]) and np.array_equal(line, ls[brk])
+    assert np.array_equal(t_hi, ts[np.r_[np.flatnonzero(brk)[1:], len(ts)] - 1])
+    assert np.array_equal(count, np.bincount(ref_run)) and brk.sum() > 12 * 2    # gaps split lines
+
+    pieces = np.where(rng.uniform(size=len(t_lo)) < 0.8, np.ceil((t_hi - t_lo + 1) / 15.0), 0).astype(np.int64)
+    length = (t_hi - t_lo + 1) / np.maximum(pieces, 1)
+    first_center, spacing = t_lo + length / 2 - 0.5, length
+    group, sw, swt, n, group_run, first = piece_groups(order, run, t, mag, first_center, spacing, pieces)
+    piece = np.clip(np.round((ts - first_center[run]) / np.where(spacing[run] > 0, spacing[run], 1.0)), 0,
+                    np.maximum(pieces[run] - 1, 0)).astype(np.int64)
+    has = pieces[run] > 0
+    ref_group = (np.cumsum(pieces) - pieces)[run] + piece
+    assert np.array_equal(group[has], ref_group[has]) and (group[~has] == -1).all() and (~has).any()
+    g, w = ref_group[has], mag[order][has]
+    assert np.array_equal(sw, np.bincount(g, w, pieces.sum())) and np.array_equal(n, np.bincount(g, minlength=len(sw)))
+    assert np.array_equal(swt, np.bincount(g, w * ts[has], pieces.sum()))
+    seen = n > 0
+    assert np.array_equal(group_run[seen], run[has][np.unique(g, return_index=True)[1]])
+    assert np.array_equal(labels[first[seen]], line[group_run[seen]])

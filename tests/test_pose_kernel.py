@@ -1,0 +1,96 @@
+"""The tracker's compiled visibility, sampling, projection and residual kernels give what numpy
+computed before them (``track`` used these numpy forms until 2026-12-06)."""
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from accumcli.geometry import invert, make_transform, rotate_vectors, transform_points
+from accumcli.pose_kernel import in_view, nearest_residuals, projected_normals, sample_points
+from accumcli.recording import StereoIntrinsics
+from accumcli.segments import Segments
+from accumcli.visibility import IMAGE_MARGIN_PX, MIN_DEPTH_M, segments_in_both_images
+
+INTR = StereoIntrinsics(600.0, 600.0, 319.5, 239.5, 0.08, 640, 480)
+
+
+def _model(n=400, seed=11):
+    """Segments in a 0.5 m cube around the object origin, some behind or beside the cameras' view."""
+    rng = np.random.default_rng(seed)
+    directions = rng.normal(size=(n, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    views = rng.normal(size=(n, 3)) + [0, 0, -2]
+    views /= np.linalg.norm(views, axis=1, keepdims=True)
+    return Segments("object", rng.uniform(-0.25, 0.25, (n, 3)), directions, rng.uniform(0.005, 0.06, n), np.ones(n),
+                    np.ones(n, np.int64), {"view_direction": views, "view_spread_deg": rng.uniform(0, 30, n)})
+
+
+def _pose():
+    return make_transform(Rotation.from_rotvec([0.2, -0.3, 0.1]).as_matrix(), [0.02, -0.01, 0.6])
+
+
+def test_in_view_is_segments_in_both_images_and_the_cone_test():
+    model, T = _model(), _pose()
+    keep, beyond = in_view(model.centers, model.directions, model.lengths, T[:3, :3].copy(), T[:3, 3].copy(),
+                           invert(T)[:3, 3], model.extra["view_direction"], model.extra["view_spread_deg"], True,
+                           INTR.fx, INTR.fy, INTR.cx, INTR.cy, INTR.baseline, INTR.width, INTR.height,
+                           IMAGE_MARGIN_PX, MIN_DEPTH_M, 25.0)
+    to_camera = invert(T)[:3, 3] - model.centers
+    to_camera /= np.linalg.norm(to_camera, axis=1, keepdims=True)
+    ref_beyond = np.degrees(np.arccos(np.clip(np.sum(to_camera * model.extra["view_direction"], axis=1), -1, 1))) \
+        - model.extra["view_spread_deg"]
+    inside = segments_in_both_images(model, T, INTR)
+    assert np.allclose(beyond, ref_beyond, rtol=0, atol=1e-9)
+    assert np.array_equal(keep, inside & (ref_beyond <= 25.0))
+    assert 0.1 < inside.mean() < 0.9 and 0 < keep.sum() < inside.sum()     # both tests decide somewhere
+    plain, _ = in_view(model.centers, model.directions, model.lengths, T[:3, :3].copy(), T[:3, 3].copy(),
+                       invert(T)[:3, 3], np.zeros((0, 3)), np.zeros(0), False, INTR.fx, INTR.fy, INTR.cx, INTR.cy,
+                       INTR.baseline, INTR.width, INTR.height, IMAGE_MARGIN_PX, MIN_DEPTH_M, 0.0)
+    assert np.array_equal(plain, inside)
+
+
+def test_sample_points_are_evenly_along_the_kept_segments_bit_for_bit():
+    model = _model(50)
+    keep = np.arange(50) % 3 != 0
+    points, dirs, owner = sample_points(model.centers, model.directions, model.lengths, keep, 5)
+    kept = model.select(keep)
+    s = (np.arange(5) + 0.5) / 5 - 0.5
+    ref = kept.centers[:, None, :] + (s[None, :, None] * kept.lengths[:, None, None]) * kept.directions[:, None, :]
+    assert np.array_equal(points, ref.reshape(-1, 3))
+    assert np.array_equal(dirs, np.repeat(kept.directions, 5, axis=0))
+    assert np.array_equal(owner, np.repeat(np.arange(keep.sum()), 5))
+
+
+def _numpy_geometry(points_cam, dirs_cam):
+    """The projections and unit normals per side as ``track._measure`` computed them with numpy."""
+    projected = INTR.project(points_cam)[:2], INTR.project(points_cam + 0.002 * dirs_cam)[:2]
+    out = []
+    for side in (0, 1):
+        uv = projected[0][side]
+        d = projected[1][side] - uv
+        d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
+        out.append((uv, np.column_stack([-d[:, 1], d[:, 0]])))
+    return out
+
+
+def test_projected_normals_and_nearest_residuals_equal_the_numpy_forms_bit_for_bit():
+    model, T = _model(), _pose()
+    points, dirs, _ = sample_points(model.centers, model.directions, model.lengths, np.ones(len(model), bool), 3)
+    P, D = transform_points(T, points), rotate_vectors(T, dirs)
+    P = P[P[:, 2] > 0.1]
+    D = D[: len(P)]
+    uv, normal = projected_normals(P, D, INTR.fx, INTR.fy, INTR.cx, INTR.cy, INTR.baseline, 0.002)
+    for side, (ref_uv, ref_normal) in enumerate(_numpy_geometry(P, D)):
+        assert np.array_equal(uv[side], ref_uv) and np.array_equal(normal[side], ref_normal)
+    rng = np.random.default_rng(12)
+    candidates = rng.normal(0, 3, (2, len(P), 3))
+    candidates[rng.uniform(size=candidates.shape) < 0.4] = np.nan        # some samples with none
+    moved = transform_points(make_transform(Rotation.from_rotvec([0.002, 0.0, -0.001]).as_matrix(), [0.001, 0, 0]), P)
+    got = nearest_residuals(moved, uv, normal, candidates, INTR.fx, INTR.fy, INTR.cx, INTR.cy, INTR.baseline)
+    projected = INTR.project(moved)
+    for side in (0, 1):
+        along = np.sum((projected[side] - uv[side]) * normal[side], axis=1)
+        gaps = along[:, None] - candidates[side]
+        distance = np.where(np.isnan(gaps), np.inf, np.abs(gaps))
+        ref = np.take_along_axis(gaps, np.argmin(distance, axis=1)[:, None], axis=1)[:, 0]
+        assert np.array_equal(got[side], ref, equal_nan=True)
+    assert np.isnan(got).any() and not np.isnan(got).all()
