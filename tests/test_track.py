@@ -210,6 +210,29 @@ def test_tracker_follows_the_sequence_from_the_first_pose_only(noisy_pair, model
     assert np.median(errors[:, 0]) < 0.2 and np.median(errors[:, 1]) < 0.001
 
 
+def test_a_pose_refused_only_for_its_standard_deviations_is_followed_but_not_tracked(noisy_pair, model_of_exact):
+    """Limits on the standard deviations that no pose meets: every frame is 'lost' for them, yet the
+    motion follows its pose (sim_201 of the tracking scoreboard: a model of parallel edges), so each
+    frame is refined from the last and stays on the truth; a pose the images do not show (coverage
+    limit above 1) is not followed, and the next frame has nothing to start from."""
+    exact, _ = noisy_pair
+    truth = read_truth(exact.replace(".mcap", ".truth.json"))
+    strict = TrackParams(max_std_deg=1e-6, max_std_mm=1e-6, calibrate_limits=False)
+    tracker = PoseTracker(model_of_exact, strict)
+    with Recording(exact) as rec:
+        frames = list(rec.frames(0, 6))
+    for frame in frames:
+        estimate = tracker.update(frame, frame.T_camera_object if frame.index == 0 else None)
+        assert estimate.status == "lost" and estimate.reason.startswith("standard deviation"), estimate.reason
+        rotation, translation = pose_error(estimate.T_camera_object, truth.pose_at(frame.timestamp_ns))
+        assert rotation < 0.5 and translation < 0.002
+    assert tracker.history[-1][0] == frames[-1].timestamp_ns
+    blind = PoseTracker(model_of_exact, replace(strict, min_coverage=1.01))
+    first = blind.update(frames[0], frames[0].T_camera_object)
+    assert first.status == "lost" and "coverage" in first.reason and not blind.history
+    assert not np.isfinite(blind.update(frames[1]).T_camera_object).any()
+
+
 def test_ransac_recovers_a_pose_from_3d_segments():
     rng = np.random.default_rng(3)
     n = 120
