@@ -67,7 +67,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .geometry import outer, unit
+from .metric_kernel import pair_costs_at
 
 
 @dataclass(frozen=True)
@@ -145,82 +145,40 @@ def candidate_pairs(centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b,
     i = np.asarray(index).reshape(len(centers_b), k)[found].astype(np.int64)
     if len(i) == 0:
         return empty
-    ok, cost, wide = pair_costs(centers_a[i], dirs_a[i], lengths_a[i], centers_b[j], dirs_b[j], lengths_b[j],
-                                thresholds, _rows(sigmas_a, i), _rows(sigmas_b, j), _rows(plane_b, j),
-                                None if info_a is None else info_a[i])
+    ok, cost, wide = _pair_costs_at(i, j, centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b, thresholds,
+                                    sigmas_a, sigmas_b, plane_b, info_a)
     pairs = i[ok], j[ok], cost[ok]
     return pairs + (wide[ok],) if widening else pairs
-
-
-def _rows(sigmas, index):
-    return None if sigmas is None else (sigmas[0][index], sigmas[1][index])
 
 
 def pair_costs(centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b, thresholds: MetricThresholds,
                sigmas_a=None, sigmas_b=None, plane_b=None, info_a=None):
     """Row by row (K rows): (ok (K,) bool, cost (K,), widening (K,)) of the pairs (a[k], b[k]), as
     ``candidate_pairs`` defines them (cost inf where not ok)."""
-    s_p, nominal = thresholds.s_p, np.radians(thresholds.s_o_deg)
-    s_o = nominal         # the angle's threshold; by covariance the widening counts the position only
-    angle = d_o(dirs_a, dirs_b)
+    rows = np.arange(len(centers_a))
+    return _pair_costs_at(rows, rows, centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b, thresholds,
+                          sigmas_a, sigmas_b, plane_b, info_a)
+
+
+def _pair_costs_at(i, j, centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b, thresholds: MetricThresholds,
+                   sigmas_a=None, sigmas_b=None, plane_b=None, info_a=None):
+    """``pair_costs`` of the pairs (a[i[k]], b[j[k]]) (``metric_kernel.pair_costs_at``, which reads the
+    rows itself). The direction gate by covariance (module docstring): the Mahalanobis distance of b's
+    direction from a's, in the tangent plane of a, under a's covariance (the inverse of ``info_a``
+    across a, less its information along a, plus (2 / pi)^2 so that it stays at most about a right
+    angle; without ``info_a`` a's sigma in every sense), b's (its sigma within its view plane and the
+    plane's sigma across it; its sigma in every sense where it has no plane) and (s_o / k)^2."""
     gated = sigmas_a is not None and sigmas_b is not None
     by_covariance = gated and plane_b is not None
-    if gated:
-        s_p = pair_thresholds(thresholds, sigmas_a[0], sigmas_b[0], s_p, thresholds.max_scale)
-        if not by_covariance:
-            s_o = pair_thresholds(thresholds, sigmas_a[1], sigmas_b[1], s_o, thresholds.max_scale_direction)
-    dist = d_p(centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b, s_p)
-    angle_cost = (angle / s_o) ** 2
-    if by_covariance:    # only where the position and the ceiling let a pair through
-        angle_cost = np.full(len(angle), np.inf)
-        rows = np.flatnonzero((dist <= s_p) & (angle <= thresholds.max_angle_scale * nominal))
-        distance = direction_distance(
-            dirs_a[rows], sigmas_a[1][rows], None if info_a is None else info_a[rows], dirs_b[rows],
-            sigmas_b[1][rows], (plane_b[0][rows], plane_b[1][rows]), nominal / thresholds.gate_sigmas)
-        angle_cost[rows] = (distance / thresholds.gate_sigmas) ** 2
-    ok = (angle_cost <= 1.0) & (dist <= s_p)
-    cost = np.where(ok, (dist / s_p) ** 2 + angle_cost, np.inf)
-    return ok, cost, np.broadcast_to(s_p / thresholds.s_p * s_o / nominal, ok.shape)
-
-
-def _across(dirs, sigma) -> np.ndarray:
-    """(K, 3, 3) covariances ``sigma`` (K,) rad in every sense across unit directions (K, 3)."""
-    return sigma[:, None, None] ** 2 * (np.eye(3) - outer(dirs))
-
-
-def direction_distance(dirs_a, sigma_a, info_a, dirs_b, sigma_b, plane_b, floor) -> np.ndarray:
-    """(K,) Mahalanobis distance of undirected unit directions b from a (K, 3), in the tangent plane of a,
-    under a's covariance (the inverse of ``info_a`` (K, 3, 3) 1/rad^2 across a, less its information
-    along a, as ``line_model.merge`` pins a sigma; at most about a right angle in any sense; without
-    ``info_a``, ``sigma_a`` (K,) rad in every sense), b's (``sigma_b`` (K,) rad within its view plane
-    ``plane_b`` = (normal (K, 3), a zero row for none; sigma (K,)) and the plane's sigma across it;
-    ``sigma_b`` in every sense where it has no plane) and ``floor`` rad in every sense. 2x2 algebra
-    throughout: no eigen-decomposition per pair."""
-    normal, plane_sigma = plane_b
-    has_plane = np.any(normal != 0, axis=1)
-    within = np.cross(normal, dirs_b)
-    within /= np.maximum(np.linalg.norm(within, axis=1, keepdims=True), 1e-12)
-    cov_b = np.where(has_plane[:, None, None],
-                     sigma_b[:, None, None] ** 2 * outer(within) + plane_sigma[:, None, None] ** 2 * outer(normal),
-                     _across(dirs_b, sigma_b))
-    helper = np.where(np.abs(dirs_a[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    e1 = unit(np.cross(dirs_a, helper))
-    basis = np.stack([e1, np.cross(dirs_a, e1)], axis=2)                    # (K, 3, 2), across a
-    eye = np.eye(2)
-    if info_a is None:
-        cov = sigma_a[:, None, None] ** 2 * eye
-    else:
-        along = np.einsum("ki,kij,kj->k", dirs_a, info_a, dirs_a)
-        info = np.einsum("kia,kij,kjb->kab", basis, info_a, basis) - along[:, None, None] * eye + (2 / np.pi) ** 2 * eye
-        cov = _inverse_2x2(info)
-    cov = cov + np.einsum("kia,kij,kjb->kab", basis, cov_b, basis) + floor ** 2 * eye
-    sign = np.where(np.sum(dirs_a * dirs_b, axis=1) >= 0, 1.0, -1.0)
-    offset = np.einsum("kia,ki->ka", basis, dirs_b * sign[:, None])
-    return np.sqrt(np.einsum("ka,kab,kb->k", offset, _inverse_2x2(cov), offset))
-
-
-def _inverse_2x2(m: np.ndarray) -> np.ndarray:
-    """(K, 2, 2) inverses of (K, 2, 2) matrices, in closed form."""
-    det = m[:, 0, 0] * m[:, 1, 1] - m[:, 0, 1] * m[:, 1, 0]
-    adjugate = np.stack([np.stack([m[:, 1, 1], -m[:, 0, 1]], 1), np.stack([-m[:, 1, 0], m[:, 0, 0]], 1)], 1)
-    return adjugate / det[:, None, None]
+    none, no_rows = np.zeros(1), np.zeros((1, 3))
+    contiguous = np.ascontiguousarray
+    return pair_costs_at(
+        contiguous(i, np.int64), contiguous(j, np.int64), *(contiguous(x, np.float64) for x in (
+            centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b)),
+        float(thresholds.s_p), float(thresholds.s_o_deg), float(thresholds.gate_sigmas), float(thresholds.max_scale),
+        float(thresholds.max_scale_direction), float(thresholds.max_angle_scale),
+        *((contiguous(x, np.float64) for x in (*sigmas_a, *sigmas_b)) if gated else (none,) * 4), gated,
+        contiguous(plane_b[0], np.float64) if by_covariance else no_rows,
+        contiguous(plane_b[1], np.float64) if by_covariance else none, by_covariance,
+        contiguous(info_a, np.float64) if by_covariance and info_a is not None else np.zeros((1, 3, 3)),
+        by_covariance and info_a is not None)

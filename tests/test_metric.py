@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from accumcli.metric import MetricThresholds, candidate_pairs, d_o, d_p, f_p, pair_costs
+from accumcli.geometry import outer, unit
+from accumcli.metric import MetricThresholds, candidate_pairs, d_o, d_p, f_p, pair_costs, pair_thresholds
 
 S_P = 0.003
 X, Y = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
@@ -149,3 +150,98 @@ def test_direction_gate_by_covariance_forgives_a_tilt_where_a_side_is_unsure_onl
                         + np.radians(0.5) ** -2 * np.outer(Y, Y))[None]      # information, 1/rad^2
     assert paired([0, 1, 0], 12.0, sigmas_b=precise, plane_b=no_plane, info_a=unsure_towards_z)
     assert not paired([0, 0, 1], 12.0, sigmas_b=precise, plane_b=no_plane, info_a=unsure_towards_z)
+
+
+# The numpy form of the pair costs, the reference of the compiled kernel (``metric_kernel``).
+def _numpy_pair_costs(centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b, thresholds: MetricThresholds,
+               sigmas_a=None, sigmas_b=None, plane_b=None, info_a=None):
+    """``pair_costs`` as numpy computed it before the compiled kernel (2026-12-06)."""
+    s_p, nominal = thresholds.s_p, np.radians(thresholds.s_o_deg)
+    s_o = nominal         # the angle's threshold; by covariance the widening counts the position only
+    angle = d_o(dirs_a, dirs_b)
+    gated = sigmas_a is not None and sigmas_b is not None
+    by_covariance = gated and plane_b is not None
+    if gated:
+        s_p = pair_thresholds(thresholds, sigmas_a[0], sigmas_b[0], s_p, thresholds.max_scale)
+        if not by_covariance:
+            s_o = pair_thresholds(thresholds, sigmas_a[1], sigmas_b[1], s_o, thresholds.max_scale_direction)
+    dist = d_p(centers_a, dirs_a, lengths_a, centers_b, dirs_b, lengths_b, s_p)
+    angle_cost = (angle / s_o) ** 2
+    if by_covariance:    # only where the position and the ceiling let a pair through
+        angle_cost = np.full(len(angle), np.inf)
+        rows = np.flatnonzero((dist <= s_p) & (angle <= thresholds.max_angle_scale * nominal))
+        distance = _numpy_direction_distance(
+            dirs_a[rows], sigmas_a[1][rows], None if info_a is None else info_a[rows], dirs_b[rows],
+            sigmas_b[1][rows], (plane_b[0][rows], plane_b[1][rows]), nominal / thresholds.gate_sigmas)
+        angle_cost[rows] = (distance / thresholds.gate_sigmas) ** 2
+    ok = (angle_cost <= 1.0) & (dist <= s_p)
+    cost = np.where(ok, (dist / s_p) ** 2 + angle_cost, np.inf)
+    return ok, cost, np.broadcast_to(s_p / thresholds.s_p * s_o / nominal, ok.shape)
+
+
+def _numpy_across(dirs, sigma) -> np.ndarray:
+    """(K, 3, 3) covariances ``sigma`` (K,) rad in every sense across unit directions (K, 3)."""
+    return sigma[:, None, None] ** 2 * (np.eye(3) - outer(dirs))
+
+
+def _numpy_direction_distance(dirs_a, sigma_a, info_a, dirs_b, sigma_b, plane_b, floor) -> np.ndarray:
+    """(K,) Mahalanobis distance of undirected unit directions b from a (K, 3), in the tangent plane of a,
+    under a's covariance (the inverse of ``info_a`` (K, 3, 3) 1/rad^2 across a, less its information
+    along a, as ``line_model.merge`` pins a sigma; at most about a right angle in any sense; without
+    ``info_a``, ``sigma_a`` (K,) rad in every sense), b's (``sigma_b`` (K,) rad within its view plane
+    ``plane_b`` = (normal (K, 3), a zero row for none; sigma (K,)) and the plane's sigma across it;
+    ``sigma_b`` in every sense where it has no plane) and ``floor`` rad in every sense. 2x2 algebra
+    throughout: no eigen-decomposition per pair."""
+    normal, plane_sigma = plane_b
+    has_plane = np.any(normal != 0, axis=1)
+    within = np.cross(normal, dirs_b)
+    within /= np.maximum(np.linalg.norm(within, axis=1, keepdims=True), 1e-12)
+    cov_b = np.where(has_plane[:, None, None],
+                     sigma_b[:, None, None] ** 2 * outer(within) + plane_sigma[:, None, None] ** 2 * outer(normal),
+                     _numpy_across(dirs_b, sigma_b))
+    helper = np.where(np.abs(dirs_a[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    e1 = unit(np.cross(dirs_a, helper))
+    basis = np.stack([e1, np.cross(dirs_a, e1)], axis=2)                    # (K, 3, 2), across a
+    eye = np.eye(2)
+    if info_a is None:
+        cov = sigma_a[:, None, None] ** 2 * eye
+    else:
+        along = np.einsum("ki,kij,kj->k", dirs_a, info_a, dirs_a)
+        info = np.einsum("kia,kij,kjb->kab", basis, info_a, basis) - along[:, None, None] * eye + (2 / np.pi) ** 2 * eye
+        cov = _numpy_inverse_2x2(info)
+    cov = cov + np.einsum("kia,kij,kjb->kab", basis, cov_b, basis) + floor ** 2 * eye
+    sign = np.where(np.sum(dirs_a * dirs_b, axis=1) >= 0, 1.0, -1.0)
+    offset = np.einsum("kia,ki->ka", basis, dirs_b * sign[:, None])
+    return np.sqrt(np.einsum("ka,kab,kb->k", offset, _numpy_inverse_2x2(cov), offset))
+
+
+def _numpy_inverse_2x2(m: np.ndarray) -> np.ndarray:
+    """(K, 2, 2) inverses of (K, 2, 2) matrices, in closed form."""
+    det = m[:, 0, 0] * m[:, 1, 1] - m[:, 0, 1] * m[:, 1, 0]
+    adjugate = np.stack([np.stack([m[:, 1, 1], -m[:, 0, 1]], 1), np.stack([-m[:, 1, 0], m[:, 0, 0]], 1)], 1)
+    return adjugate / det[:, None, None]
+
+
+def test_compiled_pair_costs_equal_the_numpy_form_bit_for_bit():
+    """Ungated, gated, and gated by covariance with and without a's direction information, on random
+    pairs (half of them parallel, some observations without a view plane): the same ok, cost and
+    widening to the last bit."""
+    rng = np.random.default_rng(21)
+    n = 4000
+    ca, cb, da, db, la, lb = _random_segments(rng, n)
+    db[n // 2: n // 2 + n // 4] = unit(da[n // 2: n // 2 + n // 4] + rng.normal(0, 0.15, (n // 4, 3)))  # near
+    th = MetricThresholds()
+    sa = (rng.uniform(0.0002, 0.004, n), rng.uniform(0.001, 0.2, n))
+    sb = (rng.uniform(0.0002, 0.004, n), rng.uniform(0.001, 0.2, n))
+    normal = unit(np.cross(db, rng.normal(size=(n, 3))))
+    normal[rng.uniform(size=n) < 0.2] = 0.0                                    # no plane
+    plane = (normal, rng.uniform(0.002, 0.02, n))
+    a = rng.normal(size=(n, 3, 3))
+    info = np.einsum("nij,nkj->nik", a, a) * 1e3 + np.eye(3) * 10.0             # symmetric positive definite
+    cases = [(None, None, None, None), (sa, sb, None, None), (sa, sb, plane, None), (sa, sb, plane, info)]
+    for sigmas_a, sigmas_b, plane_b, info_a in cases:
+        got = pair_costs(ca, da, la, cb, db, lb, th, sigmas_a, sigmas_b, plane_b, info_a)
+        with np.errstate(invalid="ignore"):   # random information is not always positive across a: NaN both
+            ref = _numpy_pair_costs(ca, da, la, cb, db, lb, th, sigmas_a, sigmas_b, plane_b, info_a)
+        assert np.array_equal(got[0], ref[0]) and np.array_equal(got[1], ref[1]) and np.array_equal(got[2], ref[2])
+        assert 0 < got[0].sum() < n
