@@ -37,6 +37,18 @@ def _inverse_2x2(m00, m01, m10, m11):  # pragma: no cover
 
 
 @kernel
+def _across_2x2(basis, m):  # pragma: no cover
+    """(2, 2) basis^T m basis of a (3, 3) ``m`` in the (3, 2) ``basis``, summed as numpy's einsum."""
+    out = np.zeros((2, 2))
+    for a in range(2):
+        for b in range(2):
+            for i in range(3):
+                for j in range(3):
+                    out[a, b] += basis[i, a] * m[i, j] * basis[j, b]
+    return out
+
+
+@kernel
 def _direction_distance(ua, sigma_a, info, has_info, ub, sigma_b, normal, plane_sigma, floor):  # pragma: no cover
     """``metric.direction_distance`` of one pair (``ua``, ``ub``, ``normal`` (3,); ``info`` (3, 3))."""
     has_plane = normal[0] != 0 or normal[1] != 0 or normal[2] != 0
@@ -69,22 +81,14 @@ def _direction_distance(ua, sigma_a, info, has_info, ub, sigma_b, normal, plane_
         for i in range(3):
             for j in range(3):
                 along += ua[i] * info[i, j] * ua[j]
-        m = np.zeros((2, 2))
+        m = _across_2x2(basis, info)
         for a in range(2):
             for b in range(2):
-                for i in range(3):
-                    for j in range(3):
-                        m[a, b] += basis[i, a] * info[i, j] * basis[j, b]
                 m[a, b] = m[a, b] - along * (1.0 if a == b else 0.0) + (2 / np.pi) ** 2 * (1.0 if a == b else 0.0)
         c00, c01, c10, c11 = _inverse_2x2(m[0, 0], m[0, 1], m[1, 0], m[1, 1])
     else:
         c00, c01, c10, c11 = sigma_a ** 2, 0.0, 0.0, sigma_a ** 2
-    p = np.zeros((2, 2))
-    for a in range(2):
-        for b in range(2):
-            for i in range(3):
-                for j in range(3):
-                    p[a, b] += basis[i, a] * cov_b[i, j] * basis[j, b]
+    p = _across_2x2(basis, cov_b)
     c00, c01 = c00 + p[0, 0] + floor ** 2, c01 + p[0, 1]
     c10, c11 = c10 + p[1, 0], c11 + p[1, 1] + floor ** 2
     sign = 1.0 if ua[0] * ub[0] + ua[1] * ub[1] + ua[2] * ub[2] >= 0 else -1.0
