@@ -78,8 +78,7 @@ from __future__ import annotations
 import numpy as np
 
 from .chain_kernel import neighbour_links, straight_chain_labels
-from .group_kernel import end_tapered, link_components
-from .grouping import group_range
+from .group_kernel import end_tapered, line_extents, link_components
 from .pair_kernel import collinear_links
 from .lines2d import (EdgePoints, Gradients, LineParams, Segments2D, StageTimes, _canonical, _weighted_line_fit,
                       detection_start, directed_line_fit, dot2, edge_points, local_segments, refine_on_gradient)
@@ -142,11 +141,10 @@ def collinear_lines(points: EdgePoints, chains: np.ndarray, reach_px: float, max
     on = chains >= 0
     if not on.any():
         return np.zeros(0, np.int64)
-    lab, xy = chains[on].astype(np.int64), points.xy[on]
-    n = int(lab.max()) + 1
     center, direction = fits if fits is not None else chain_fits(points, chains)
-    t = dot2(xy - center[lab], direction[lab])
-    t_lo, t_hi = group_range(lab, n, t)
+    n = len(center)
+    _, t_lo, t_hi = line_extents(np.ascontiguousarray(chains, np.int64), np.ascontiguousarray(points.xy[:, 0], np.float64),
+                                 np.ascontiguousarray(points.xy[:, 1], np.float64), center, direction)
     ends = np.concatenate([center + t_lo[:, None] * direction, center + t_hi[:, None] * direction])
     normal = np.column_stack([-direction[:, 1], direction[:, 0]])
     links = collinear_links(ends, center, direction, normal, float(reach_px), float(max_deg),

@@ -42,11 +42,28 @@ def group_moments(index, n, x, y, w):  # pragma: no cover
 
 
 @kernel
-def end_tapered(index, x, y, mag, center, direction, taper_px, floor):  # pragma: no cover
-    """(M,) ``mag`` of the points (``index`` (M,) int64 group or -1, ``x``, ``y`` (M,) float64) scaled
-    by clip((d + 0.5) / ``taper_px``, ``floor``, 1) at d along their group's line (``center``,
-    unit ``direction`` (G, 2)) from its nearer end point: ``edge_chains.end_tapered_weights``,
-    bit for bit as numpy computes it, in two passes instead of a dozen whole-array calls."""
+def group_line_fit(index, n, xy, w):  # pragma: no cover
+    """Per group 0..``n``-1 of the points (``index`` (M,) int64, ``xy`` (M, 2), ``w`` (M,) float64):
+    the weight sum (n,), the weighted centroid (n, 2) and the unit direction (n, 2) of the weighted
+    total-least-squares line, at half the angle of (2 sxy, sxx - syy) (``group_moments``): as
+    ``lines2d._weighted_line_fit`` computed them with numpy after the sums, in the same pass."""
+    x, y = np.empty(len(index)), np.empty(len(index))
+    for i in range(len(index)):
+        x[i], y[i] = xy[i, 0], xy[i, 1]
+    sw, mx, my, sxx, syy, sxy = group_moments(index, n, x, y, w)
+    centers, directions = np.empty((n, 2)), np.empty((n, 2))
+    for k in range(n):
+        angle = 0.5 * np.arctan2(2 * sxy[k], sxx[k] - syy[k])
+        centers[k, 0], centers[k, 1] = mx[k], my[k]
+        directions[k, 0], directions[k, 1] = np.cos(angle), np.sin(angle)
+    return sw, centers, directions
+
+
+@kernel
+def line_extents(index, x, y, center, direction):  # pragma: no cover
+    """Per point (``index`` (M,) int64 group or -1, ``x``, ``y`` (M,) float64) its position t along its
+    group's line (``center``, unit ``direction`` (G, 2); undefined for -1), and per group the
+    smallest and largest t (G,) (inf and -inf for an empty group)."""
     m, n = len(index), len(center)
     t = np.empty(m)
     lo, hi = np.full(n, np.inf), np.full(n, -np.inf)
@@ -57,6 +74,17 @@ def end_tapered(index, x, y, mag, center, direction, taper_px, floor):  # pragma
         t[i] = (x[i] - center[k, 0]) * direction[k, 0] + (y[i] - center[k, 1]) * direction[k, 1]
         lo[k] = min(lo[k], t[i])
         hi[k] = max(hi[k], t[i])
+    return t, lo, hi
+
+
+@kernel
+def end_tapered(index, x, y, mag, center, direction, taper_px, floor):  # pragma: no cover
+    """(M,) ``mag`` of the points (``index`` (M,) int64 group or -1, ``x``, ``y`` (M,) float64) scaled
+    by clip((d + 0.5) / ``taper_px``, ``floor``, 1) at d along their group's line (``center``,
+    unit ``direction`` (G, 2)) from its nearer end point: ``edge_chains.end_tapered_weights``,
+    bit for bit as numpy computes it, in two passes instead of a dozen whole-array calls."""
+    m = len(index)
+    t, lo, hi = line_extents(index, x, y, center, direction)
     weights = mag.copy()
     for i in range(m):
         k = index[i]

@@ -63,7 +63,7 @@ import numpy as np
 from .errors import InputError
 from .grouping import group_range
 from .chain_kernel import line_order
-from .group_kernel import group_moments, line_coordinates, magnitude as magnitude_image, piece_groups, supporting_runs
+from .group_kernel import group_line_fit, line_coordinates, magnitude as magnitude_image, piece_groups, supporting_runs
 from .profile_kernel import cut_grid, cut_peaks
 from .pair_kernel import junction_growth
 
@@ -395,13 +395,10 @@ def _hough_peaks(acc: np.ndarray, flat: np.ndarray, params: LineParams, step: fl
 
 
 def _weighted_line_fit(index: np.ndarray, n_groups: int, xy: np.ndarray, w: np.ndarray):
-    """Per group: weight sum, centroid (G, 2), unit direction (G, 2) of a weighted TLS line fit."""
-    sw, mx, my, sxx, syy, sxy = group_moments(np.ascontiguousarray(index, np.int64), int(n_groups),
-                                              np.ascontiguousarray(xy[:, 0], np.float64),
-                                              np.ascontiguousarray(xy[:, 1], np.float64),
-                                              np.ascontiguousarray(w, np.float64))
-    angle = 0.5 * np.arctan2(2 * sxy, sxx - syy)
-    return sw, np.column_stack([mx, my]), np.column_stack([np.cos(angle), np.sin(angle)])
+    """Per group: weight sum, centroid (G, 2), unit direction (G, 2) of a weighted TLS line fit
+    (``group_kernel.group_line_fit``)."""
+    return group_line_fit(np.ascontiguousarray(index, np.int64), int(n_groups), np.asarray(xy, np.float64),
+                          np.ascontiguousarray(w, np.float64))
 
 
 def directed_line_fit(index: np.ndarray, n_groups: int, xy: np.ndarray, w: np.ndarray,

@@ -222,10 +222,10 @@ def _numpy_inverse_2x2(m: np.ndarray) -> np.ndarray:
     return adjugate / det[:, None, None]
 
 
-def test_compiled_pair_costs_equal_the_numpy_form_bit_for_bit():
+def test_compiled_pair_costs_equal_the_numpy_form():
     """Ungated, gated, and gated by covariance with and without a's direction information, on random
     pairs (half of them parallel, some observations without a view plane): the same ok, cost and
-    widening to the last bit."""
+    widening (to the last bit on this machine)."""
     rng = np.random.default_rng(21)
     n = 4000
     ca, cb, da, db, la, lb = _random_segments(rng, n)
@@ -243,5 +243,8 @@ def test_compiled_pair_costs_equal_the_numpy_form_bit_for_bit():
         got = pair_costs(ca, da, la, cb, db, lb, th, sigmas_a, sigmas_b, plane_b, info_a)
         with np.errstate(invalid="ignore"):   # random information is not always positive across a: NaN both
             ref = _numpy_pair_costs(ca, da, la, cb, db, lb, th, sigmas_a, sigmas_b, plane_b, info_a)
-        assert np.array_equal(got[0], ref[0]) and np.array_equal(got[1], ref[1]) and np.array_equal(got[2], ref[2])
+        finite = np.isfinite(ref[1])     # bit for bit where numpy's arccos is the C library's (not where it
+        # is vectorised, AVX-512: there within an ulp of it)
+        assert np.array_equal(got[0], ref[0]) and np.array_equal(np.isfinite(got[1]), finite)
+        assert np.allclose(got[1][finite], ref[1][finite], rtol=1e-12, atol=0) and np.array_equal(got[2], ref[2])
         assert 0 < got[0].sum() < n
