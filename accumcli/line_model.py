@@ -86,7 +86,7 @@ from .metric import MetricThresholds, candidate_pairs, d_o, d_p, pair_costs
 from .recording import StereoIntrinsics
 from .segments import Segments, concatenate
 from .stereo import view_plane_normals
-from .visibility import segments_in_both_images
+from .visibility import in_both_images
 
 
 
@@ -313,8 +313,9 @@ class LineSegmentType:
         """(N,) bool: the frame should have shown these model segments (see the module docstring)."""
         p, intr = self.params, context.intrinsics
         T = context.T_camera_object
-        inside = segments_in_both_images(model, T, intr, border_distance=context.border_distance)
-        uv_left = intr.project(transform_points(T, model.endpoints().reshape(-1, 3)))[0]
+        ends = transform_points(T, model.endpoints().reshape(-1, 3))     # camera frame, as segments_in_both_images
+        inside = in_both_images(ends, intr, border_distance=context.border_distance).reshape(-1, 2).all(axis=1)
+        uv_left = intr.project(ends)[0]
         d2 = (uv_left[1::2] - uv_left[0::2])
         angle = np.degrees(np.arctan2(np.abs(d2[:, 1]), np.abs(d2[:, 0])))
         not_critical = angle >= p.critical_angle_deg + 3.0

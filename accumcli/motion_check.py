@@ -78,6 +78,7 @@ from scipy.spatial.transform import Rotation, Slerp
 from scipy.stats import binomtest
 
 from .geometry import invert
+from .jit import kernel
 from .segments import Segments
 
 SCALES = np.round(np.arange(0.70, 1.4001, 0.01), 3)
@@ -221,7 +222,8 @@ class MotionCheck:
         pairs = cKDTree(moved + middle * t).sparse_distance_matrix(
             tree, half * np.linalg.norm(t) + max(MATCH_M, JITTER_FAR_M), output_type="ndarray")
         i, j = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
-        aligned = np.abs(np.sum(turned[i] * directions[j], axis=1)) >= np.cos(np.radians(MATCH_DEG))
+        aligned = _aligned(i, j, np.ascontiguousarray(turned), np.ascontiguousarray(directions, np.float64),
+                           float(np.cos(np.radians(MATCH_DEG))))
         i, j = i[aligned], j[aligned]
         rel = centers[j] - moved[i]                                       # (P, 3): Q - R P, metres
         rr, rt, tt = np.sum(rel * rel, axis=1), rel @ t, float(t @ t)
@@ -293,3 +295,16 @@ def _decided(ratio: float, pair_values: list, best: float) -> bool:
     agree = sum((value > 0) == (best > 0) for value in pair_values)
     return ratio >= MIN_PEAK_RATIO and bool(pair_values) and binomtest(
         agree, len(pair_values), alternative="greater").pvalue <= MAX_SIGN_P
+
+
+@kernel
+def _aligned(i, j, a, b, min_cosine):  # pragma: no cover
+    """(P,) bool: |a[i] . b[j]| >= ``min_cosine`` for the pairs (``i``, ``j`` (P,) int64; ``a``, ``b``
+    unit rows (N, 3), (M, 3)), summed as numpy sums a row of three; compiled: the pairs are many
+    (a consecutive frame's candidates within the whole range of scales), and numpy gathered both
+    sides' rows first."""
+    out = np.empty(len(i), np.bool_)
+    for q in range(len(i)):
+        x, y = a[i[q]], b[j[q]]
+        out[q] = abs(x[0] * y[0] + x[1] * y[1] + x[2] * y[2]) >= min_cosine
+    return out

@@ -138,3 +138,17 @@ def test_a_proposed_offset_is_written_out_whole():
 
     assert [_milliseconds(v) for v in (1234567.0, -50.0, 12.5, 1749998765801.0)] == \
         ["1234567", "-50", "12.5", "1749998765801"]
+
+
+def test_the_compiled_alignment_test_equals_numpy_s():
+    from accumcli.motion_check import _aligned
+
+    rng = np.random.default_rng(9)
+    a, b = (v / np.linalg.norm(v, axis=1, keepdims=True) for v in rng.normal(size=(2, 500, 3)))
+    b[:250] = a[:250] + rng.normal(0, 0.05, (250, 3))
+    b /= np.linalg.norm(b, axis=1, keepdims=True)
+    i, j = rng.integers(0, 500, 20000), rng.integers(0, 500, 20000)
+    j[:5000] = i[:5000]
+    limit = np.cos(np.radians(5.0))
+    got = _aligned(i, j, a, b, limit)
+    assert np.array_equal(got, np.abs(np.sum(a[i] * b[j], axis=1)) >= limit) and 0 < got.sum() < len(i)
