@@ -143,8 +143,8 @@ def collinear_lines(points: EdgePoints, chains: np.ndarray, reach_px: float, max
         return np.zeros(0, np.int64)
     center, direction = fits if fits is not None else chain_fits(points, chains)
     n = len(center)
-    _, t_lo, t_hi = line_extents(np.ascontiguousarray(chains, np.int64), np.ascontiguousarray(points.xy[:, 0], np.float64),
-                                 np.ascontiguousarray(points.xy[:, 1], np.float64), center, direction)
+    x, y = (np.ascontiguousarray(points.xy[:, k], np.float64) for k in (0, 1))
+    _, t_lo, t_hi = line_extents(np.ascontiguousarray(chains, np.int64), x, y, center, direction)
     ends = np.concatenate([center + t_lo[:, None] * direction, center + t_hi[:, None] * direction])
     normal = np.column_stack([-direction[:, 1], direction[:, 0]])
     links = collinear_links(ends, center, direction, normal, float(reach_px), float(max_deg),

@@ -146,7 +146,7 @@ from .pose_kernel import in_view, nearest_residuals, normal_equations, projected
 from .lines2d import Gradients, LineParams, frame_gradients
 from .recording import StereoFrame, StereoIntrinsics
 from .segments import Segments
-from .visibility import IMAGE_MARGIN_PX, MIN_DEPTH_M, segments_in_both_images
+from .visibility import IMAGE_MARGIN_PX, MIN_DEPTH_M
 
 
 @dataclass(frozen=True)
@@ -337,9 +337,9 @@ def _measure(points_cam, dirs_cam, intr: StereoIntrinsics, grads: tuple, search:
     (polarity-free, orientation within ``min_orientation_cos``), each to sub-pixel precision
     (``edge_search.edge_candidates``)."""
     out = []
-    uv, normal = projected_normals(np.ascontiguousarray(points_cam, np.float64), np.ascontiguousarray(dirs_cam, np.float64),
-                                   float(intr.fx), float(intr.fy), float(intr.cx), float(intr.cy),
-                                   float(intr.baseline), 0.002)
+    uv, normal = projected_normals(np.ascontiguousarray(points_cam, np.float64),
+                                   np.ascontiguousarray(dirs_cam, np.float64), float(intr.fx), float(intr.fy),
+                                   float(intr.cx), float(intr.cy), float(intr.baseline), 0.002)
     for side, grad in enumerate(grads):
         candidates = edge_candidates(grad.gx, grad.gy, uv[side], normal[side], int(np.ceil(search)),
                                      float(params.min_gradient), float(params.min_orientation_cos), int(params.candidates))
@@ -516,7 +516,7 @@ def _gauss_newton(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, gra
     uv0, normal, candidates = (np.ascontiguousarray(np.stack(m)) for m in zip(*measurements))
     for _ in range(params.iterations_per_level):
         P = transform_points(T, points_obj)
-        pivot = P.sum(axis=0) / len(P)  # (= P.mean(axis=0), without its wrapper) rotating about the object, not the camera, decouples the increments
+        pivot = P.sum(axis=0) / len(P)  # the mean; rotating about the object, not the camera, decouples the increments
         # expected: a segment beyond its cone of views pulls less (expected_weights)
         H, g, found, swr2, sw = normal_equations(P, pivot, uv0, normal, candidates, expected, intr.fx, intr.fy,
                                                  intr.cx, intr.cy, intr.baseline, float(tukey))
