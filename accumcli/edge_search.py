@@ -3,9 +3,8 @@
 Why compiled: per point and image the search reads the gradient at up to 81 positions along the
 normal, keeps the local maxima of the gradient across the segment and ranks them; in numpy that
 was an (S, K) bilinear remap and a dozen (S, K) arrays per search, a third of the tracking time.
-Here each point is one loop over its K positions. The gradient is read from gx and gy (no
-interleaved copy to make per frame) by exact bilinear interpolation (OpenCV's remap rounds the
-position to 1/32 px), with the border replicated.
+Here each point is one loop over its K positions. The gradient is read by exact bilinear
+interpolation (OpenCV's remap rounds the position to 1/32 px), with the border replicated.
 """
 
 from __future__ import annotations
@@ -15,9 +14,9 @@ from .jit import kernel
 
 
 @kernel
-def _bilinear(gx, gy, x, y):  # pragma: no cover
-    """(gx, gy) of the two (H, W) images at (x, y) px, border replicated."""
-    h, w = gx.shape[0], gx.shape[1]
+def _bilinear(gxy, x, y):  # pragma: no cover
+    """(gx, gy) of the (H, W, 2) image at (x, y) px, border replicated."""
+    h, w = gxy.shape[0], gxy.shape[1]
     if not (np.isfinite(x) and np.isfinite(y)):
         return 0.0, 0.0
     x, y = min(max(x, -1.0), float(w)), min(max(y, -1.0), float(h))   # beyond: the border (no int overflow)
@@ -26,15 +25,15 @@ def _bilinear(gx, gy, x, y):  # pragma: no cover
     i0, j0 = int(x0), int(y0)
     i1, j1 = min(max(i0 + 1, 0), w - 1), min(max(j0 + 1, 0), h - 1)
     i0, j0 = min(max(i0, 0), w - 1), min(max(j0, 0), h - 1)
-    out0 = ((1 - fx) * gx[j0, i0] + fx * gx[j0, i1]) * (1 - fy) + \
-        ((1 - fx) * gx[j1, i0] + fx * gx[j1, i1]) * fy
-    out1 = ((1 - fx) * gy[j0, i0] + fx * gy[j0, i1]) * (1 - fy) + \
-        ((1 - fx) * gy[j1, i0] + fx * gy[j1, i1]) * fy
+    out0 = ((1 - fx) * gxy[j0, i0, 0] + fx * gxy[j0, i1, 0]) * (1 - fy) + \
+        ((1 - fx) * gxy[j1, i0, 0] + fx * gxy[j1, i1, 0]) * fy
+    out1 = ((1 - fx) * gxy[j0, i0, 1] + fx * gxy[j0, i1, 1]) * (1 - fy) + \
+        ((1 - fx) * gxy[j1, i0, 1] + fx * gxy[j1, i1, 1]) * fy
     return out0, out1
 
 
 @kernel
-def edge_candidates(gx, gy, uv, normal, half_width, min_gradient, min_orientation_cos, n_candidates):  # pragma: no cover
+def edge_candidates(gxy, uv, normal, half_width, min_gradient, min_orientation_cos, n_candidates):  # pragma: no cover
     """(S, C) offsets, px along each point's unit ``normal`` (S, 2) from ``uv`` (S, 2) px, of the
     ``n_candidates`` strongest local maxima of the gradient across the normal within
     ``half_width`` px (integer steps, each to sub-pixel precision by a parabola through its
@@ -51,10 +50,10 @@ def edge_candidates(gx, gy, uv, normal, half_width, min_gradient, min_orientatio
         nx, ny = normal[s, 0], normal[s, 1]
         for k in range(k_count):
             step = k - half_width
-            gx_s, gy_s = _bilinear(gx, gy, uv[s, 0] + step * nx, uv[s, 1] + step * ny)
-            a = abs(gx_s * nx + gy_s * ny)
+            gx, gy = _bilinear(gxy, uv[s, 0] + step * nx, uv[s, 1] + step * ny)
+            a = abs(gx * nx + gy * ny)
             along[k] = a
-            good[k] = a >= min_gradient and a >= min_orientation_cos * np.sqrt(gx_s * gx_s + gy_s * gy_s)
+            good[k] = a >= min_gradient and a >= min_orientation_cos * np.sqrt(gx * gx + gy * gy)
         for c in range(n_candidates):      # the strongest peak not taken yet (ties: the lower offset first)
             best, best_k = 0.0, -1
             for k in range(1, k_count - 1):

@@ -341,7 +341,7 @@ def _measure(points_cam, dirs_cam, intr: StereoIntrinsics, grads: tuple, search:
                                    np.ascontiguousarray(dirs_cam, np.float64), float(intr.fx), float(intr.fy),
                                    float(intr.cx), float(intr.cy), float(intr.baseline), 0.002)
     for side, grad in enumerate(grads):
-        candidates = edge_candidates(grad.gx, grad.gy, uv[side], normal[side], int(np.ceil(search)),
+        candidates = edge_candidates(grad.gxy, uv[side], normal[side], int(np.ceil(search)),
                                      float(params.min_gradient), float(params.min_orientation_cos), int(params.candidates))
         out.append((uv[side], normal[side], candidates))
     return out

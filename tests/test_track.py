@@ -1018,10 +1018,10 @@ def test_edge_search_finds_a_step_edge_either_polarity_to_a_tenth_of_a_pixel(dar
     image[:, :100] = 40                       # a vertical step between columns 99 and 100
     if not dark_left:
         image = 240 - image
-    grad = Gradients.of(image)
+    gxy = Gradients.of(image).gxy
     uv = np.array([[90.0, 30.0], [100.0, 30.0], [60.0, 30.0]])
     normal = np.array([[1.0, 0.0], [-1.0, 0.0], [1.0, 0.0]])
-    found = edge_candidates(grad.gx, grad.gy, uv, normal, 12, 3.0, 0.85, 3)
+    found = edge_candidates(gxy, uv, normal, 12, 3.0, 0.85, 3)
     assert abs(found[0, 0] - 9.5) < 0.1 and abs(found[1, 0] - 0.5) < 0.1   # along each normal
     assert np.isnan(found[:2, 1:]).all()      # one edge: no second candidate
     assert np.isnan(found[2]).all()           # 39.5 px away: beyond the search
@@ -1035,8 +1035,7 @@ def test_edge_search_finds_nothing_far_outside_the_image_or_at_nan():
     image[:, :100] = 40
     uv = np.array([[1e30, 30.0], [-9.3e18, 30.0], [np.nan, 30.0], [np.inf, 30.0]])
     normal = np.tile([1.0, 0.0], (4, 1))
-    grad = Gradients.of(image)
-    assert np.isnan(edge_candidates(grad.gx, grad.gy, uv, normal, 40, 3.0, 0.85, 3)).all()
+    assert np.isnan(edge_candidates(Gradients.of(image).gxy, uv, normal, 40, 3.0, 0.85, 3)).all()
 
 
 def test_compiled_normal_equations_sum_what_verification_measures():
