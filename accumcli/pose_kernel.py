@@ -7,7 +7,7 @@ some forty small array operations per iteration, about a third of the tracking t
 that is one pass over the samples. This is the same arithmetic as ``track._residuals`` and
 ``track._jacobian`` (which verification still uses), summed in one loop. The others replace numpy
 forms of some thirty small array operations per call each, run at every level and verification:
-with them ``make bench``'s tracking went from 24.4 to 30 frames/s, the poses bit for bit the same
+with them ``make bench``'s tracking went from 24.4 to 28.7-30.2 frames/s, the poses bit for bit the same
 (tests/test_pose_kernel.py compares them with the numpy forms).
 """
 
