@@ -3,7 +3,8 @@ reading the same recording, one thread, versus ``extract_recording``, ``accumula
 ``track_recording`` (one worker, then two for extraction and accumulation, on the sample and on the
 60 frames of the tracking recording: the helper process needs about a second to start). The machine's speed
 drifts: SGBM and the one-worker runs alternate five times (A B A B) and each ratio is taken against
-the SGBM run just before it; the median is printed with the range. The library's compiled
+the SGBM run just before it; the median is printed with the range (tracking: the median and range
+of five runs; a single run moved by 3 % between runs of the bench). The library's compiled
 kernels are loaded once before (numba's cache, about 0.4 s per process, which a long recording
 amortizes); worker processes load them in the run they belong to.
 
@@ -51,7 +52,8 @@ for name, run in (('extract', lambda w: extract_recording({track_path!r}, os.pat
     RESULT[f'{{name}}_long'] = [run(w).pairs_per_second for w in (1, 2)]
 model = accumulate_recording({track_path!r}, frames=FrameRange(0, 20)).model
 track_recording(model, {track_path!r}, frames=FrameRange(0, 2))       # the tracker's kernels loaded once
-RESULT['track'] = track_recording(model, {track_path!r}).frames_per_second
+tracked = [track_recording(model, {track_path!r}).frames_per_second for _ in range({rounds})]
+RESULT['track'], RESULT['track_range'] = statistics.median(tracked), (min(tracked), max(tracked))
 """
 ROUNDS = 5
 
@@ -69,7 +71,9 @@ def main() -> dict:
         print(f"peer        {name:<10} {one:5.1f} pairs/s = {r[f'{name}_ratio']:.2f}x SGBM (median of {ROUNDS} paired "
               f"runs, {lo:.2f}-{hi:.2f}; target >= {target}x); --workers 2: {two:5.1f} pairs/s ({two / one:.2f}x one "
               f"worker), on the 60 frames of track_60 {long_two:5.1f} vs {long_one:5.1f} ({long_two / long_one:.2f}x)")
-    print(f"peer        track      {r['track']:5.1f} frames/s = {r['track'] / sgbm:.2f}x SGBM (target >= 30 frames/s)")
+    lo, hi = r["track_range"]
+    print(f"peer        track      {r['track']:5.1f} frames/s = {r['track'] / sgbm:.2f}x SGBM (median of {ROUNDS} runs, "
+          f"{lo:.1f}-{hi:.1f}; target >= 30 frames/s)")
     return r
 
 
