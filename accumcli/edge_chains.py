@@ -75,6 +75,8 @@ the same.
 from __future__ import annotations
 
 
+from typing import NamedTuple
+
 import numpy as np
 
 from .chain_kernel import neighbour_links, straight_chain_labels
@@ -120,39 +122,47 @@ def straight_chains(points: EdgePoints, shape: tuple[int, int], max_residual_px:
                                  float(max_residual_px), int(rounds), float(min_length_px))
 
 
-def chain_fits(points: EdgePoints, chains: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(K, 2) centre and (K, 2) unit direction of every straight chain's magnitude-weighted line
-    (``chains``: (M,) label 0..K-1 or -1; K >= 1), which ``collinear_lines`` and
-    ``end_tapered_weights`` both need: fitted once per image."""
+class ChainFits(NamedTuple):
+    """Every straight chain's magnitude-weighted line, fitted once per image for ``collinear_lines``
+    and ``end_tapered_weights``: centre and unit direction (K, 2), each edge point's position t
+    (M,) along its chain's line (undefined off the chains) and each chain's extent along it,
+    t_lo and t_hi (K,)."""
+
+    center: np.ndarray
+    direction: np.ndarray
+    t: np.ndarray
+    t_lo: np.ndarray
+    t_hi: np.ndarray
+
+
+def chain_fits(points: EdgePoints, chains: np.ndarray) -> ChainFits:
+    """The ``ChainFits`` of the straight chains (``chains``: (M,) label 0..K-1 or -1; K >= 1)."""
     on = chains >= 0
     lab = chains[on].astype(np.int64)
     _, center, direction = _weighted_line_fit(lab, int(lab.max()) + 1, points.xy[on], points.mag[on])
-    return center, direction
+    x, y = (np.ascontiguousarray(points.xy[:, k], np.float64) for k in (0, 1))
+    return ChainFits(center, direction, *line_extents(np.ascontiguousarray(chains, np.int64), x, y, center, direction))
 
 
 def collinear_lines(points: EdgePoints, chains: np.ndarray, reach_px: float, max_deg: float = COLLINEAR_DEG,
-                    max_offset_px: float = COLLINEAR_PX, fits: tuple | None = None) -> np.ndarray:
+                    max_offset_px: float = COLLINEAR_PX, fits: ChainFits | None = None) -> np.ndarray:
     """(K,) line 0..L-1 of every straight chain (``chains``: (M,) chain label 0..K-1 of every edge
     point, or -1). Chains whose ends lie within ``reach_px`` of each other, whose directions
     agree within ``max_deg`` and whose ends lie within ``max_offset_px`` of the other chain's
     line are one line (transitively), as a Hough line is: a corner, a crossing or a polarity flip
     interrupts a chain but not the line that stereo matching propagates along. ``fits``: the
     chains' ``chain_fits`` if already computed."""
-    on = chains >= 0
-    if not on.any():
+    if not (chains >= 0).any():
         return np.zeros(0, np.int64)
-    center, direction = fits if fits is not None else chain_fits(points, chains)
-    n = len(center)
-    x, y = (np.ascontiguousarray(points.xy[:, k], np.float64) for k in (0, 1))
-    _, t_lo, t_hi = line_extents(np.ascontiguousarray(chains, np.int64), x, y, center, direction)
+    center, direction, _, t_lo, t_hi = fits if fits is not None else chain_fits(points, chains)
     ends = np.concatenate([center + t_lo[:, None] * direction, center + t_hi[:, None] * direction])
     normal = np.column_stack([-direction[:, 1], direction[:, 0]])
     links = collinear_links(ends, center, direction, normal, float(reach_px), float(max_deg),
                             float(np.cos(np.radians(max_deg))), float(max_offset_px))
-    return link_components(n, np.ascontiguousarray(links, np.int64))
+    return link_components(len(center), np.ascontiguousarray(links, np.int64))
 
 
-def end_tapered_weights(points: EdgePoints, chains: np.ndarray, taper_px: float, fits: tuple | None = None
+def end_tapered_weights(points: EdgePoints, chains: np.ndarray, taper_px: float, fits: ChainFits | None = None
                         ) -> np.ndarray:
     """(M,) the edge points' magnitudes, those within ``taper_px`` of their straight chain's nearer end
     (``chains``: (M,) label or -1) scaled by (d + 0.5) / ``taper_px`` at d px from it (at least
@@ -161,10 +171,9 @@ def end_tapered_weights(points: EdgePoints, chains: np.ndarray, taper_px: float,
     ``fits``: the chains' ``chain_fits`` if already computed."""
     if taper_px <= 0 or not (chains >= 0).any():
         return points.mag.copy()
-    center, direction = fits if fits is not None else chain_fits(points, chains)
-    return end_tapered(np.ascontiguousarray(chains, np.int64), np.ascontiguousarray(points.xy[:, 0], np.float64),
-                       np.ascontiguousarray(points.xy[:, 1], np.float64), np.ascontiguousarray(points.mag, np.float64),
-                       center, direction, float(taper_px), END_TAPER_FLOOR)
+    fits = fits if fits is not None else chain_fits(points, chains)
+    return end_tapered(np.ascontiguousarray(chains, np.int64), fits.t, fits.t_lo, fits.t_hi,
+                       np.ascontiguousarray(points.mag, np.float64), float(taper_px), END_TAPER_FLOOR)
 
 
 def _on_lines(segments: Segments2D, points: EdgePoints, chains: np.ndarray, line_of_chain: np.ndarray,

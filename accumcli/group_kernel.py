@@ -78,15 +78,13 @@ def line_extents(index, x, y, center, direction):  # pragma: no cover
 
 
 @kernel
-def end_tapered(index, x, y, mag, center, direction, taper_px, floor):  # pragma: no cover
-    """(M,) ``mag`` of the points (``index`` (M,) int64 group or -1, ``x``, ``y`` (M,) float64) scaled
-    by clip((d + 0.5) / ``taper_px``, ``floor``, 1) at d along their group's line (``center``,
-    unit ``direction`` (G, 2)) from its nearer end point: ``edge_chains.end_tapered_weights``,
-    bit for bit as numpy computes it, in two passes instead of a dozen whole-array calls."""
-    m = len(index)
-    t, lo, hi = line_extents(index, x, y, center, direction)
+def end_tapered(index, t, lo, hi, mag, taper_px, floor):  # pragma: no cover
+    """(M,) ``mag`` of the points (``index`` (M,) int64 group or -1) scaled by clip((d + 0.5) /
+    ``taper_px``, ``floor``, 1) at d along their group's line from its nearer end point (``t`` (M,),
+    ``lo``, ``hi`` (G,): ``line_extents``): ``edge_chains.end_tapered_weights``, bit for bit as numpy
+    computes it, in one pass instead of a dozen whole-array calls."""
     weights = mag.copy()
-    for i in range(m):
+    for i in range(len(index)):
         k = index[i]
         if k < 0:
             continue

@@ -498,8 +498,8 @@ def local_segments(points: EdgePoints, labels: np.ndarray, params: LineParams,
         directions = line_dir[group_line]
         centers = line_center[group_line] + t_mean[:, None] * directions
     else:
-        members = order[group >= 0]
-        _, centers, directions = _weighted_line_fit(group[group >= 0], n_groups, xy[members], mag[members])
+        pieced = group >= 0
+        _, centers, directions = _weighted_line_fit(group[pieced], n_groups, xy[order[pieced]], mag[order[pieced]])
     agree = np.abs(dot2(directions, line_dir[group_line])) >= np.cos(
         np.radians(2 * params.vote_window_deg))
     ok = (count >= 3) & agree

@@ -331,31 +331,29 @@ def _ramp(beyond: np.ndarray | None, n: int, ramp_deg: float) -> np.ndarray:
 
 
 def _measure(points_cam, dirs_cam, intr: StereoIntrinsics, grads: tuple, search: float, params: TrackParams):
-    """Edge search along the projected normals. Returns per image (left, right) a tuple
-    (uv (S, 2), normal (S, 2), candidates (S, C) px along the normal to each edge found, NaN where
-    none): the ``params.candidates`` strongest local maxima of the gradient across the segment
+    """Edge search along the projected normals. Returns, side by side (left, right), (uv (2, S, 2),
+    normal (2, S, 2), candidates (2, S, C) px along the normal to each edge found, NaN where none):
+    the ``params.candidates`` strongest local maxima of the gradient across the segment
     (polarity-free, orientation within ``min_orientation_cos``), each to sub-pixel precision
     (``edge_search.edge_candidates``)."""
-    out = []
     uv, normal = projected_normals(np.ascontiguousarray(points_cam, np.float64),
                                    np.ascontiguousarray(dirs_cam, np.float64), float(intr.fx), float(intr.fy),
                                    float(intr.cx), float(intr.cy), float(intr.baseline), 0.002)
-    for side, grad in enumerate(grads):
-        candidates = edge_candidates(grad.gxy, uv[side], normal[side], int(np.ceil(search)),
-                                     float(params.min_gradient), float(params.min_orientation_cos), int(params.candidates))
-        out.append((uv[side], normal[side], candidates))
-    return out
+    candidates = np.stack([edge_candidates(grad.gxy, uv[side], normal[side], int(np.ceil(search)),
+                                           float(params.min_gradient), float(params.min_orientation_cos),
+                                           int(params.candidates)) for side, grad in enumerate(grads)])
+    return uv, normal, candidates
 
 
 def _residuals(P, measurements, intr: StereoIntrinsics):
     """Per image: (signed distance (S,) from each point's current projection to its nearest
     candidate edge along the normal, has-candidate mask (S,), normal (S, 2))
-    (``pose_kernel.nearest_residuals``)."""
-    uv0, normal, candidates = (np.ascontiguousarray(np.stack(m)) for m in zip(*measurements))
+    (``pose_kernel.nearest_residuals``; ``measurements``: ``_measure``'s)."""
+    uv0, normal, candidates = measurements
     r = nearest_residuals(np.ascontiguousarray(P, np.float64), uv0, normal, candidates, float(intr.fx), float(intr.fy),
                           float(intr.cx), float(intr.cy), float(intr.baseline))
     found = ~np.isnan(r)
-    return [(np.where(found[side], r[side], 0.0), found[side], measurements[side][1]) for side in (0, 1)]
+    return [(np.where(found[side], r[side], 0.0), found[side], normal[side]) for side in (0, 1)]
 
 
 def _jacobian(points_cam: np.ndarray, normal: np.ndarray, intr: StereoIntrinsics, side: int,
@@ -510,10 +508,10 @@ def _gauss_newton(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, gra
     if samples is None:
         return None
     points_obj, dirs_obj, expected, _, _ = samples
-    measurements = _measure(transform_points(T, points_obj), rotate_vectors(T, dirs_obj), intr, grads, search, params)
+    uv0, normal, candidates = _measure(transform_points(T, points_obj), rotate_vectors(T, dirs_obj), intr, grads,
+                                       search, params)
     if prior is not None:       # the prior's inverse variances per axis (rad^-2, m^-2)
         inverse = 1 / np.repeat([np.radians(params.prior_deg), params.prior_mm / 1000], 3) ** 2
-    uv0, normal, candidates = (np.ascontiguousarray(np.stack(m)) for m in zip(*measurements))
     for _ in range(params.iterations_per_level):
         P = transform_points(T, points_obj)
         pivot = P.sum(axis=0) / len(P)  # the mean; rotating about the object, not the camera, decouples the increments
@@ -572,7 +570,7 @@ def _verify_at(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, grads,
         return PoseEstimate(T.copy(), float("inf"), 0, 0, "lost", reason=f"{n} accepted model segments in view (needs 3)")
     points_obj, dirs_obj, expected, owner, segments = samples
     measurements = _measure(transform_points(T, points_obj), rotate_vectors(T, dirs_obj), intr, grads, search, params)
-    found = sum(int(np.sum(~np.isnan(c).all(axis=1))) for _, _, c in measurements)
+    found = int(np.sum(~np.isnan(measurements[2]).all(axis=2)))
     if found < 6:
         return PoseEstimate(T.copy(), float("inf"), 0, found, "lost",
                             reason=f"{found} model points found an image edge (needs 6)")

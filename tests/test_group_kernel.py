@@ -4,7 +4,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
-from accumcli.group_kernel import end_tapered, group_moments, group_range, link_components
+from accumcli.group_kernel import end_tapered, group_moments, group_range, line_extents, link_components
 from accumcli.lines2d import dot2
 
 
@@ -42,7 +42,7 @@ def test_end_tapered_equals_the_numpy_taper_bit_for_bit():
     center = rng.normal(250, 50, (20, 2))
     angle = rng.uniform(0, np.pi, 20)
     direction = np.column_stack([np.cos(angle), np.sin(angle)])
-    got = end_tapered(index, x, y, mag, center, direction, 2.5, 0.1)
+    got = end_tapered(index, *line_extents(index, x, y, center, direction), mag, 2.5, 0.1)
     on = index >= 0
     lab = index[on]
     t = dot2(np.column_stack([x, y])[on] - center[lab], direction[lab])

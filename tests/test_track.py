@@ -1061,7 +1061,7 @@ def test_compiled_normal_equations_sum_what_verification_measures():
     H, g, found, _, _ = normal_equations(P, pivot, uv0, normal, candidates, expected, intr.fx, intr.fy,
                                          intr.cx, intr.cy, intr.baseline, 4.0)
     rows = [(_jacobian(P, n, intr, side, pivot)[f], r[f], expected[f])
-            for side, (r, f, n) in enumerate(_residuals(P, list(zip(uv0, normal, candidates)), intr))]
+            for side, (r, f, n) in enumerate(_residuals(P, (uv0, normal, candidates), intr))]
     J, r, e = (np.concatenate(x) for x in zip(*rows))
     w = np.where(np.abs(r) < 4.0, (1 - (r / 4.0) ** 2) ** 2, 0.0) * e
     assert found == len(r) == 2 * 300 - 2 * 20 - np.isnan(candidates[:, 20:]).all(axis=2).sum()
