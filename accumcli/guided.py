@@ -51,11 +51,10 @@ from scipy.spatial import cKDTree
 
 from .lines2d import Gradients, Segments2D, dot2, parabola_peak, sample
 from .recording import StereoIntrinsics
-from .stereo import (Matches, StereoParams, _ncc, angle_from_rows, orientation_close, orientation_penalty,
-                     points_along)
+from .stereo import (Matches, StereoParams, angle_from_rows, orientation_close, orientation_penalty,
+                     points_along, scored_beside)
 
 NEIGHBOURS = 8        # matched pieces looked at for a piece's disparity prior
-REFERENCE_PAIRS = 64  # of the frame's matches, scored again with the found pieces
 
 
 @dataclass(frozen=True)
@@ -106,14 +105,10 @@ def guided_matches(left_img: np.ndarray, right_img: np.ndarray, left: Segments2D
                                                cos_diff[plausible])
     if len(pieces_left) == 0:
         return m, right
-    # scored as matching scores (``match``); together with up to ``REFERENCE_PAIRS`` of the frame's
-    # matched pairs, from which ``_ncc`` takes the right grey levels to the left's (it needs 20 pairs)
+    # scored as matching scores (``match``), beside the frame's matched pairs
     trial = right.concatenate(found)
-    reference = slice(0, min(len(m.left), REFERENCE_PAIRS))
-    score = _ncc(left_img, right_img, left, trial, np.concatenate([m.left[reference], pieces_left]),
-                 np.concatenate([m.right[reference], len(right) + np.arange(len(pieces_left))]),
-                 stereo)[-len(pieces_left):]
-    score = score - orientation_penalty(cos_diff, stereo)
+    score = scored_beside(left_img, right_img, left, trial, m, pieces_left, len(right) + np.arange(len(pieces_left)),
+                          stereo) - orientation_penalty(cos_diff, stereo)
     take = score >= stereo.min_score
     if not take.any():
         return m, right

@@ -246,3 +246,46 @@ def test_a_short_line_alone_is_as_unsure_as_its_fit():
     print(f"sigma {sigmas[0].round(2)} -> {sigmas[1].round(2)} deg (x {ratio.round(2)})")
     expected_low, expected_high = np.degrees(0.15 * np.sqrt(12) / np.array([20.0, 15.0]))
     assert np.all((ratio >= expected_low) & (ratio <= expected_high))
+
+
+def _silhouette_pair(seed: int = 7):
+    """A bar 30 px wide at disparity 30 px (grey 90) before a brighter background (140); in the right view
+    the background left of it is darker (40: the right camera sees another part of the scene behind it),
+    so the bar's left side has opposite polarities in the two images; its right side does not."""
+    import cv2
+
+    from accumcli.recording import StereoFrame
+
+    rng = np.random.default_rng(seed)
+    left, right = np.full((240, 320), 140.0), np.full((240, 320), 140.0)
+    left[40:200, 150:180] = 90.0
+    right[:, :120] = 40.0
+    right[40:200, 120:150] = 90.0
+    images = [np.clip(cv2.GaussianBlur(im, (0, 0), 1.0) + rng.normal(0, 2.0, im.shape), 0, 255).astype(np.uint8)
+              for im in (left, right)]
+    from .scenes import INTRINSICS
+    return StereoFrame(0, 0, images[0], images[1], INTRINSICS, np.eye(4))
+
+
+def test_a_silhouette_whose_polarity_flips_between_the_views_is_matched_in_the_second_round():
+    """The first round pairs same-polarity gradients only; the second (``flipped_fallback``) pairs
+    the left segments it left unmatched with unused right ones of opposite polarity, by the
+    occluder's side: the bar's left side gets its depth (disparity 30 px), and nothing else changes."""
+    from dataclasses import replace
+
+    from .scenes import BASELINE, FX
+
+    frame = _silhouette_pair()
+    depth = FX * BASELINE / 30.0
+    u = (np.array([149.5, 179.5]) - frame.intrinsics.cx) / FX * depth   # the bar's sides, metres (x)
+    found = {}
+    for fallback in (False, True):
+        params = ExtractParams(stereo=replace(ExtractParams().stereo, flipped_fallback=fallback))
+        seg = extract_frame(frame, params).segments
+        vertical = np.abs(seg.directions[:, 1]) > 0.95
+        found[fallback] = [vertical & (np.abs(seg.centers[:, 0] - x) < 0.002) for x in u]
+        for side in found[fallback]:
+            assert np.all(np.abs(seg.centers[side, 2] - depth) < 0.003)
+        assert np.all(found[fallback][0] | found[fallback][1] | ~vertical)    # no vertical segment elsewhere
+    assert found[False][0].sum() == 0 and found[False][1].sum() >= 4          # the flipped side unmatched ...
+    assert found[True][0].sum() >= 4 and found[True][1].sum() == found[False][1].sum()   # ... until the second round
