@@ -1068,6 +1068,7 @@ class PoseTracker:
         self._accepted = _accepted(self.model)     # what tracking uses, selected once
         self._self_maps: list | None = None   # the model's RANSAC maps onto itself (``symmetries``)
         self._symmetries: dict[bool, list] = {}
+        self._slides: list | None = None      # its slides along the axis half its segments share (``slides``)
         self._calibrated = False       # the residual limits adapted from the first given pose (``calibrated``)
         self.calibration_refused: str | None = None   # why they were not (the given pose did not fit)
         self.limits_source = "the first frame"        # where the limits in ``params`` come from (for reports)
@@ -1094,11 +1095,18 @@ class PoseTracker:
                          if support >= 0.5 * len(accepted) and _apart(T, np.eye(4), self.params)]
                 self._self_maps = found + [invert(T) for T in found]        # a shift by one square and back
             found = self._self_maps
-            axes = dict(max_axes=3, min_axis_share=0.25) if every_axis else {}
             # slides along parallel segments, which RANSAC over pairs at 30 to 90 degrees cannot propose
-            self._symmetries[every_axis] = found + [S for S in slides(accepted, self.params.distinct_m, **axes)
-                                                    if all(_apart(S, T, self.params) for T in found)]
+            moved = (slides(accepted, self.params.distinct_m, max_axes=3, min_axis_share=0.25) if every_axis
+                     else self.own_slides())
+            self._symmetries[every_axis] = found + [S for S in moved if all(_apart(S, T, self.params) for T in found)]
         return self._symmetries[every_axis]
+
+    def own_slides(self) -> list[np.ndarray]:
+        """The model's ``slides`` along the axis half of its accepted segments share (computed once; a
+        few ms, where ``symmetries``' RANSAC of the model onto itself takes a quarter of a second)."""
+        if self._slides is None:
+            self._slides = slides(self._accepted, self.params.distinct_m)
+        return self._slides
 
     def predict(self, time_ns: int) -> list[np.ndarray]:
         """Starting poses for a frame at ``time_ns``: constant velocity (``geometry.extrapolate`` from
@@ -1166,18 +1174,16 @@ class PoseTracker:
         return found
 
     def _twins(self, estimate: PoseEstimate, frame: StereoFrame, grads, every_axis: bool = False,
-               slides_only: bool = False) -> list[PoseEstimate]:
+               moves: list[np.ndarray] | None = None) -> list[PoseEstimate]:
         """Refinements of ``estimate``'s pose moved by each of the model's ``symmetries`` (method
         'symmetry': rivals in ``decide``, so the images must tell the poses apart) of a re-acquired pose;
         with slides along ``every_axis`` for a user's starting pose (``_climb_twins``). Re-acquisition
         keeps the slides along one axis: the chessboard's cell shifts along x covered 0.78 and 0.81
         beside right poses at 0.87 and 0.90 (under ``min_margin``: 2 of 13 frames ambiguous).
-        ``slides_only``: the translations among them (``_slid_twins``)."""
+        ``moves``: these transforms S instead (``_slid_twins``)."""
         p = self.params
         twins = []
-        for S in self.symmetries(every_axis):
-            if slides_only and not np.allclose(S[:3, :3], np.eye(3)):
-                continue
+        for S in self.symmetries(every_axis) if moves is None else moves:
             twin = _refine(self._accepted, frame, estimate.T_camera_object @ S, p, grads, p.search_px[2:],
                            p.tukey_px[2:])
             twin.method = "symmetry"
@@ -1196,11 +1202,13 @@ class PoseTracker:
         the wrist at coverages of 0.71 and 0.66, the frames around them 0.86, and only re-acquisition
         tried the slides; taking every such twin as a rival instead left sim_201 'ambiguous' where it
         had been tracked right (tracked 0.433 -> 0.033). Nothing for other models: a rotational
-        symmetry needs a jump that the motion refutes."""
+        symmetry needs a jump that the motion refutes. Only while no frame was tracked since a start or
+        a loss, or where the coverage fell (``_coverage_fell``: the slid poses above covered 0.15 and
+        0.18 less than the frames before; the tracking bench's frames fall by 0.05 on 18 of 60 frames)."""
         best = _verified_best(candidates)
-        if best is None:
+        if best is None or not self.own_slides() or (self._recent_coverage and not self._coverage_fell(candidates)):
             return []
-        better = [t for t in self._twins(best, frame, grads, slides_only=True)
+        better = [t for t in self._twins(best, frame, grads, moves=self.own_slides())
                   if t.status == "tracked" and t.coverage > best.coverage + CLIMB_ALIKE]
         if not better:
             return []

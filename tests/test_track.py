@@ -1248,7 +1248,8 @@ def test_while_tracking_a_slid_twin_that_covers_clearly_more_replaces_the_pose_a
     """``PoseTracker._slid_twins``: a model that slides onto itself (an extrusion) has its verified
     pose's slid twins refined while tracking; one covering more than ``CLIMB_ALIKE`` more is taken
     (method 'slid') and the pose it beats is refuted; twins covering about as much, or not verified,
-    change nothing (the motion decides); a model that does not slide tries none."""
+    change nothing (the motion decides); a model that does not slide tries none, and does not pay
+    for ``symmetries``' RANSAC of the model onto itself."""
     from accumcli.track import CLIMB_ALIKE, PoseEstimate
 
     pieces = [[x, y, z] for x, z in ((0, 0), (0.03, 0), (0, 0.03), (0.03, 0.03)) for y in (0.0, 0.025, 0.05)]
@@ -1256,10 +1257,10 @@ def test_while_tracking_a_slid_twin_that_covers_clearly_more_replaces_the_pose_a
     asked = []
 
     def twins_of(coverages, status="tracked"):
-        def twins(estimate, frame, grads, every_axis=False, slides_only=False):
-            asked.append(slides_only)
+        def twins(estimate, frame, grads, every_axis=False, moves=None):
+            asked.append(len(moves))
             return [PoseEstimate(estimate.T_camera_object @ S, 0.3, 200, 210, status, method="symmetry", coverage=c)
-                    for S, c in zip(tracker.symmetries(), coverages)]
+                    for S, c in zip(moves, coverages)]
         return twins
 
     def best():
@@ -1268,7 +1269,7 @@ def test_while_tracking_a_slid_twin_that_covers_clearly_more_replaces_the_pose_a
     pose = best()
     monkeypatch.setattr(tracker, "_twins", twins_of([0.82, 0.60]))
     [slid] = tracker._slid_twins([pose], None, None)
-    assert slid.method == "slid" and slid.coverage == 0.82 and asked == [True]
+    assert slid.method == "slid" and slid.coverage == 0.82 and asked == [2]        # the two slides, +-25 mm
     assert pose.status == "lost" and pose.refuted and "0.82" in pose.reason
     for coverages, status in (([0.71 + CLIMB_ALIKE / 2, 0.60], "tracked"), ([0.90, 0.95], "lost")):
         pose = best()
@@ -1276,4 +1277,4 @@ def test_while_tracking_a_slid_twin_that_covers_clearly_more_replaces_the_pose_a
         assert tracker._slid_twins([pose], None, None) == [] and pose.status == "tracked"
     rng = np.random.default_rng(1)
     box = PoseTracker(_segments(rng.uniform(-0.03, 0.03, (12, 3)), np.repeat(np.eye(3), 4, axis=0)))
-    assert box._slid_twins([best()], None, None) == []      # no slide: _twins itself finds nothing to move by
+    assert box._slid_twins([best()], None, None) == [] and box._self_maps is None   # nor RANSAC's self-maps computed
