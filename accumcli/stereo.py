@@ -24,13 +24,14 @@ Matching, in rectified images (epipolar lines are image rows):
   tests of edges that match with their own polarity. So they get a round of their own
   (``flipped_fallback``, ``_flipped``): the left segments that the first round left unmatched,
   against the right segments it left unused, scored by the occluder's side (the one-sided score
-  below). Measured on ``make suite`` (4 runs a row, 2026-12-06) against one round: the matched
-  share higher on every row (median 0.606 -> 0.641, dev_tprofile 0.594 -> 0.633), correct 3D
-  median 0.457 -> 0.469, single-frame near-object precision median 0.814 -> 0.809; accumulated
-  completeness mean 0.666 -> 0.669 (sim_108 0.598 -> 0.637; medians 0.673 both, worst 0.306 ->
-  0.308), precision mean 0.947 -> 0.946 with the same three rows under 0.95 (sim_105 0.944 ->
-  0.932, within its run-to-run 0.046; dev_cube_small 0.889 -> 0.897); the tracking scoreboard kept
-  no false frame (sim_206 tracked 0.700 -> 0.767, the chessboard 0.846 -> 0.923).
+  below), and kept only where two or more pieces of one left line flip onto one right line (a
+  silhouette runs along an edge; ``min_stretch``). Measured on ``make suite`` (4 runs a row,
+  2026-12-06) against one round: the matched share median 0.606 -> 0.615, correct 3D 0.457 ->
+  0.463, accumulated completeness mean 0.666 -> 0.667, precision mean 0.947 both, single-frame
+  near-object precision median 0.814 both. Without the two-piece condition the matched share
+  rose more (median 0.641, dev_tprofile 0.594 -> 0.633; completeness mean 0.669, sim_108 0.598 ->
+  0.637), but the near-object precision fell (median 0.809) and stray flipped pairs made the real
+  chessboard's model hold background on one run of four (2 of 749 segments, 130 mm off the board).
 - Score = NCC of grey-level patches sampled along the two segments (rows
   through the segment, horizontal offsets across it, so corresponding samples
   share a row) minus ``orientation_weight * (angle difference / max)^2``.
@@ -289,6 +290,10 @@ def _flipped(left_img, right_img, left: Segments2D, right: Segments2D, found: Ma
         return found
     score = scored_beside(left_img, right_img, left, right, found, li, rj, params) - orientation_penalty(cos_diff, params)
     li, rj, disparity, score, accept = _decide(left, right, li, rj, disparity, score, params)
+    # only where two or more pieces of one left line flip onto one right line: a silhouette, not a stray pair
+    key = left.line_id[li] * (int(right.line_id.max()) + 1) + right.line_id[rj]
+    keys, counts = np.unique(key[accept], return_counts=True)
+    accept &= np.isin(key, keys[counts >= params.min_stretch])
     k = np.flatnonzero(accept)
     return Matches(np.concatenate([found.left, li[k]]), np.concatenate([found.right, rj[k]]),
                    np.concatenate([found.disparity, disparity[k]]), np.concatenate([found.score, score[k]]),
