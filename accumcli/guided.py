@@ -39,7 +39,8 @@ every run (without the search: one false frame in the four runs, dev_steps at 0.
 8 % in view (``TrackParams.min_shown``) removed them but lost right frames of the chessboard's
 snapshots, whose many-aspect model shows 3 % of itself at a right pose. On the 21 off-scoreboard
 runs over three shifts it made no difference (11 false frames either way, measured with 10 Gauss-Newton
-steps a level). Again on 2026-12-06, with stereo's second round for flipped polarities: ``make suite``
+steps a level). Again on 2026-12-06, with stereo's second round for flipped polarities (its first form, without
+the two-piece condition): ``make suite``
 (4 runs a row) completeness mean 0.669 -> 0.675, median 0.673 -> 0.675, worst 0.308 -> 0.350
 (dev_cube_small), precision median 0.975 -> 0.970 (rows under 0.95 three both); the tracking
 scoreboard with its models: sim_201 tracked two frames 10.8 and 10.9 mm off (none since the tracker
