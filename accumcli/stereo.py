@@ -238,8 +238,9 @@ def _candidates(left: Segments2D, right: Segments2D, usable_l: np.ndarray, usabl
     cos_diff = np.abs(dot2(left.directions[li], right.directions[rj]))
     ok = ((np.abs(v - right.centers[rj, 1]) <= half_height) & (disparity >= d_min) & (disparity <= d_max)
           & orientation_close(cos_diff, params))
+    li, rj = li[ok], rj[ok]
     same = dot2(left.normals[li] * left.polarity[li, None], right.normals[rj] * right.polarity[rj, None]) > 0
-    return li[ok], rj[ok], disparity[ok], cos_diff[ok], same[ok]
+    return li, rj, disparity[ok], cos_diff[ok], same
 
 
 def _decide(left: Segments2D, right: Segments2D, li, rj, disparity, score, params: StereoParams):
@@ -278,7 +279,8 @@ def _flipped(left_img, right_img, left: Segments2D, right: Segments2D, found: Ma
     and flip its gradient; only the occluder's side then looks alike, which the one-sided score
     (``_ncc``, at most ``side_score``) compares. A round of its own, after the first, because as
     rivals in the first round's ratio tests the flipped candidates lost more true matches than they
-    added (module docstring). Scored beside the first round's matches (``scored_beside``)."""
+    added (module docstring). Scored beside the first round's matches (``scored_beside``); kept
+    only where ``min_stretch`` or more pieces of one left line flip onto one right line."""
     li, rj, disparity, cos_diff = flipped
     free_l = np.ones(len(left), bool)
     free_l[found.left] = False
@@ -290,8 +292,7 @@ def _flipped(left_img, right_img, left: Segments2D, right: Segments2D, found: Ma
         return found
     score = scored_beside(left_img, right_img, left, right, found, li, rj, params) - orientation_penalty(cos_diff, params)
     li, rj, disparity, score, accept = _decide(left, right, li, rj, disparity, score, params)
-    # only where two or more pieces of one left line flip onto one right line: a silhouette, not a stray pair
-    key = left.line_id[li] * (int(right.line_id.max()) + 1) + right.line_id[rj]
+    key = _line_pairs(left, right, li, rj)      # two pieces or more of a line pair: a silhouette, not a stray pair
     keys, counts = np.unique(key[accept], return_counts=True)
     accept &= np.isin(key, keys[counts >= params.min_stretch])
     k = np.flatnonzero(accept)
@@ -312,6 +313,11 @@ def orientation_penalty(cos_diff: np.ndarray, params: StereoParams) -> np.ndarra
                                         / params.max_orientation_diff_deg) ** 2
 
 
+def _line_pairs(left: Segments2D, right: Segments2D, li: np.ndarray, rj: np.ndarray) -> np.ndarray:
+    """(P,) one integer per (left line, right line) of the pairs li, rj: the stretch a pair lies on."""
+    return left.line_id[li] * (int(right.line_id.max()) + 1) + right.line_id[rj]
+
+
 def _propagate(left: Segments2D, right: Segments2D, li, rj, disparity, score, accept, params: StereoParams):
     """(P,) bool: candidate pairs that the global support of an accepted stretch adds.
 
@@ -323,8 +329,7 @@ def _propagate(left: Segments2D, right: Segments2D, li, rj, disparity, score, ac
     too. This recovers the parts of an edge that one view's background made
     ambiguous, e.g. along an occluding contour.
     """
-    n_right_lines = int(right.line_id.max()) + 1
-    key = left.line_id[li] * n_right_lines + right.line_id[rj]
+    key = _line_pairs(left, right, li, rj)
     stretches, stretch = np.unique(key[accept], return_inverse=True)
     if len(stretches) == 0:
         return np.zeros(len(li), bool)

@@ -1173,17 +1173,16 @@ class PoseTracker:
                 found.append(restarted)
         return found
 
-    def _twins(self, estimate: PoseEstimate, frame: StereoFrame, grads, every_axis: bool = False,
-               moves: list[np.ndarray] | None = None) -> list[PoseEstimate]:
-        """Refinements of ``estimate``'s pose moved by each of the model's ``symmetries`` (method
-        'symmetry': rivals in ``decide``, so the images must tell the poses apart) of a re-acquired pose;
-        with slides along ``every_axis`` for a user's starting pose (``_climb_twins``). Re-acquisition
-        keeps the slides along one axis: the chessboard's cell shifts along x covered 0.78 and 0.81
-        beside right poses at 0.87 and 0.90 (under ``min_margin``: 2 of 13 frames ambiguous).
-        ``moves``: these transforms S instead (``_slid_twins``)."""
+    def _twins(self, estimate: PoseEstimate, frame: StereoFrame, grads, moves: list[np.ndarray]) -> list[PoseEstimate]:
+        """Refinements of ``estimate``'s pose moved by each of ``moves`` (transforms S, object frame;
+        method 'symmetry': rivals in ``decide``, so the images must tell the poses apart): the model's
+        ``symmetries`` for a re-acquired pose, with slides along every axis for a user's starting pose
+        (``_climb_twins``), its ``own_slides`` while tracking (``_slid_twins``). Re-acquisition keeps
+        the slides along one axis: the chessboard's cell shifts along x covered 0.78 and 0.81 beside
+        right poses at 0.87 and 0.90 (under ``min_margin``: 2 of 13 frames ambiguous)."""
         p = self.params
         twins = []
-        for S in self.symmetries(every_axis) if moves is None else moves:
+        for S in moves:
             twin = _refine(self._accepted, frame, estimate.T_camera_object @ S, p, grads, p.search_px[2:],
                            p.tukey_px[2:])
             twin.method = "symmetry"
@@ -1208,7 +1207,7 @@ class PoseTracker:
         best = _verified_best(candidates)
         if best is None or not self.own_slides() or (self._recent_coverage and not self._coverage_fell(candidates)):
             return []
-        better = [t for t in self._twins(best, frame, grads, moves=self.own_slides())
+        better = [t for t in self._twins(best, frame, grads, self.own_slides())
                   if t.status == "tracked" and t.coverage > best.coverage + CLIMB_ALIKE]
         if not better:
             return []
@@ -1228,7 +1227,7 @@ class PoseTracker:
         the chessboard's 13 frames."""
         best = given
         for step in range(CLIMB_STEPS + 1):
-            twins = self._twins(best, frame, grads, every_axis=True)
+            twins = self._twins(best, frame, grads, self.symmetries(every_axis=True))
             better = [t for t in twins if t.coverage > best.coverage + CLIMB_ALIKE]
             if not better or step == CLIMB_STEPS:
                 break
@@ -1386,7 +1385,7 @@ class PoseTracker:
                 candidates.append(found)
             verified = [c for c in candidates if c.status == "tracked"]
             for c in sorted(verified, key=_rank, reverse=True)[:1]:    # the best one's symmetric twins
-                candidates += self._twins(c, frame, grads)
+                candidates += self._twins(c, frame, grads, self.symmetries())
             self._pin_unconfirmed(candidates, ("ransac", "symmetry"), "re-acquired")
             accepted = self._accepted
             tree = cKDTree(observed.centers) if len(observed) else None

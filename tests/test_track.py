@@ -1257,7 +1257,7 @@ def test_while_tracking_a_slid_twin_that_covers_clearly_more_replaces_the_pose_a
     asked = []
 
     def twins_of(coverages, status="tracked"):
-        def twins(estimate, frame, grads, every_axis=False, moves=None):
+        def twins(estimate, frame, grads, moves):
             asked.append(len(moves))
             return [PoseEstimate(estimate.T_camera_object @ S, 0.3, 200, 210, status, method="symmetry", coverage=c)
                     for S, c in zip(moves, coverages)]
