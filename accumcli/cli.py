@@ -590,5 +590,38 @@ def eval_(inputs, poses, as_json, position_tol, angle_tol, background_dist, min_
         _wrote([plot])
 
 
+# -- check -----------------------------------------------------------------------------------------
+@command()
+@click.argument("model_file", metavar="MODEL.json", type=click.Path(dir_okay=False, exists=True))
+@recording_arg()
+@click.option("--json", "as_json", is_flag=True, help="Print the figures as JSON.")
+@click.option("--sample-frames", type=click.IntRange(2, 100), default=12, show_default=True,
+              help="Frames compared with each other, spread evenly over --frames.")
+@frames_option
+@recording_options
+def check(model_file, recording, as_json, sample_frames, frames, options):
+    """Check a model on a recording's images, without a truth: the share of its accepted
+    segments that moves with the object, and the share that stays still in the camera's
+    view (background the accumulation kept).
+
+    Each frame pair compares, per segment, the edge in the image where the object's motion
+    takes the segment with the edge where it stays still. The object's frame is the one the
+    model names unless --object-frame is given.
+
+    \b
+    Example:
+      accum check out/model.json sample_data/sim_box.mcap
+    """
+    from .model_io import dumps
+    from .report import figures_lines
+    from .runs.still import check_model
+    from .still_check import StillCheckParams
+
+    figures = run_with_progress("checking", check_model, model_file, recording, options=options, frames=frames,
+                                params=StillCheckParams(frames=sample_frames),
+                                object_frame_of_model=not _object_frame_given())
+    _report([dumps(figures, indent=1)] if as_json else figures_lines(figures), product=True)
+
+
 if __name__ == "__main__":
     main()

@@ -9,6 +9,10 @@ completeness / background, and the accumulation's stereo pairs per second; then 
 worst row of every column. ``ok twice`` against 1 is what extraction loses, ``complete`` against
 ``ok twice`` what accumulation loses (``in model`` against ``complete``: found, never confirmed);
 ``object`` and ``gripper`` split ``complete`` by the truth edges' part, where the truth names them.
+``still``: the share of the accepted length that the recording's images show staying still in the
+camera's view instead of moving with the object (``accum check``, which needs no truth: on the real
+teabox, whose truth cannot judge the handle and the disc that move with its board, the background
+figure that can be checked without it).
 A second table splits what extraction loses (1 - ``ok twice``) by the last stage that two frames passed
 (``accumcli.funnel``): shown in fewer than two frames, never detected twice, critical, unmatched, wrong in 3D.
 
@@ -53,6 +57,7 @@ COLUMNS = [("2d", "funnel_detected_2d", "high"), ("not crit", "funnel_not_critic
            ("in model", "completeness_any_confidence", "high"), ("precision", "precision", "high"),
            ("complete", "completeness", "high"), ("object", "completeness_object", "high"),
            ("gripper", "completeness_gripper", "high"), ("backgr", "background", "low"),
+           ("still", "still_share", "low"),
            ("prec sd", "precision_sd", "low"), ("compl sd", "completeness_sd", "low"),
            ("pairs/s", "pairs_per_second", "high")]
 LOSS_COLUMNS = [OK_TWICE] + [(name.replace("_", " "), f"funnel_{name}", "low") for name in LOSSES]
@@ -120,6 +125,7 @@ def score(row: Row, view_planes: bool = True, motion: str = "gripper", right_sea
     from accumcli.runs import (
         RecordingOptions,
         accumulate_recording,
+        check_model,
         evaluate_file,
         extract_recording,
     )
@@ -142,6 +148,7 @@ def score(row: Row, view_planes: bool = True, motion: str = "gripper", right_sea
     if "surface_precision" in figures:   # judged by surface where the truth has faces (teabox README)
         figures["precision"], figures["background"] = figures["surface_precision"], figures["surface_background"]
     figures["pairs_per_second"] = result.pairs_per_second
+    figures["still_share"] = check_model(str(model_file), row.path, options=options)["still_share"]
     return figures
 
 
