@@ -138,7 +138,9 @@ class LineAccumulation:
             T_camera_object = T_corrected
         elif self.params.motion == "tracked":
             T_camera_object, estimate = self._refined(frame, T_camera_object, extraction)
-        context = FrameContext(T_camera_object, frame.intrinsics, frame.border_distance)
+        context = FrameContext(T_camera_object, frame.intrinsics, frame.border_distance,
+                               left_gradients=extraction.gradients[0] if extraction.gradients is not None else None,
+                               extracted_left=extraction.left.select(extraction.left_index))
         segments = extraction.segments
         if self.params.box is not None:
             segments = segments.select(inside_box(transform_points(invert(T_camera_object), segments.centers),

@@ -27,9 +27,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
+from .edge_evidence import edge_evidence
 from .geometry import transform_points
 from .lines2d import Gradients
 from .recording import StereoIntrinsics
@@ -95,7 +95,8 @@ def still_check(model: Segments, views: list[tuple[Gradients, np.ndarray]], intr
     placed = [_project(points, T, intrinsics) for _, T in views]          # (N, S, 2) by each view's pose
     normals = [_normals(uv) for uv in placed]
     # evidence[b][a]: in view b's image, of the segments placed by view a's pose
-    evidence = [[_evidence(grads, placed[a], normals[a], intrinsics, params) for a in range(k)]
+    size = (intrinsics.width, intrinsics.height)
+    evidence = [[edge_evidence(grads, placed[a], normals[a], size, params.margin_px) for a in range(k)]
                 for grads, _ in views]
     r = params.ratio
     for a in range(k):
@@ -124,20 +125,3 @@ def _normals(uv: np.ndarray) -> np.ndarray:
     d = uv[:, -1] - uv[:, 0]
     d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
     return np.stack([-d[:, 1], d[:, 0]], axis=1)
-
-
-def _evidence(grads: Gradients, uv: np.ndarray, normal: np.ndarray, intrinsics: StereoIntrinsics,
-              params: StillCheckParams) -> np.ndarray:
-    """(N,) the median over a segment's points of the largest gradient across its line (grey levels
-    per pixel) within 1 px of it; NaN where a point lies outside the image (less ``margin_px``)."""
-    best = np.zeros(uv.shape[:2], np.float32)
-    inside = np.ones(uv.shape[:2], bool)
-    for offset in (-1.0, 0.0, 1.0):
-        p = (uv + normal[:, None, :] * offset).astype(np.float32)
-        u, v = p[..., 0], p[..., 1]
-        m = params.margin_px
-        inside &= (u >= m) & (u <= intrinsics.width - 1 - m) & (v >= m) & (v <= intrinsics.height - 1 - m)
-        gx = cv2.remap(grads.gx, u, v, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
-        gy = cv2.remap(grads.gy, u, v, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
-        best = np.maximum(best, np.abs(gx * normal[:, None, 0] + gy * normal[:, None, 1]))
-    return np.where(inside.all(axis=1), np.median(best, axis=1), np.nan)

@@ -22,6 +22,7 @@ from accumcli.line_model import (
     sigmas,
     to_model,
 )
+from accumcli.lines2d import Gradients, Segments2D
 from accumcli.recording import StereoIntrinsics
 from accumcli.segments import Segments
 
@@ -119,6 +120,38 @@ INTR = StereoIntrinsics(600.0, 600.0, 319.5, 239.5, 0.08, 640, 480)
 def _one_segment(direction=(0.0, 1.0, 0.0)) -> Segments:
     return Segments("gripper", np.zeros((1, 3)), np.array([direction]), np.array([0.012]), np.array([0.9]),
                     np.ones(1, np.int64), {"sigma_depth_m": np.array([0.001])})
+
+
+def _pieces(centers, directions, lengths) -> Segments2D:
+    n = len(centers)
+    directions = np.asarray(directions, float).reshape(n, 2)
+    return Segments2D(np.asarray(centers, float).reshape(n, 2), directions, np.asarray(lengths, float),
+                      np.ones(n, np.int8), np.full(n, 50.0), np.arange(n), np.zeros(n), directions)
+
+
+def test_a_frame_that_shows_the_edge_but_extracted_nothing_along_it_does_not_miss_the_segment():
+    """The segment projects to a vertical line at u = 319.5 px. A frame whose image shows an edge
+    there but whose extraction gave no 3D segment along it says nothing (the extractor failed, not
+    the object); one that extracted a piece there (its 3D segment went to another model segment) or
+    whose image is flat there misses it."""
+    kind = LineSegmentType()
+    T = make_transform(np.eye(3), [0.0, 0.0, 0.5])
+    model = kind.observe(_one_segment(), FrameContext(T, INTR))
+    edge = np.full((480, 640), 60, np.uint8)
+    edge[:, 320:] = 180
+    flat = np.full((480, 640), 60, np.uint8)
+    along = _pieces([[319.5, 239.5]], [[0.0, 1.0]], [12.0])
+    aside = _pieces([[200.0, 239.5]], [[0.0, 1.0]], [12.0])
+
+    def expected(image, extracted):
+        return kind.expected(model, FrameContext(T, INTR, left_gradients=Gradients.of(image),
+                                                 extracted_left=extracted))[0]
+
+    assert not expected(edge, aside)       # shown, nothing extracted along it: no miss
+    assert expected(edge, along)           # extracted there, and it went elsewhere: a miss
+    assert expected(flat, aside)           # nothing there to extract: a miss
+    without = LineSegmentType(LineModelParams(unextracted_no_miss=False))
+    assert without.expected(model, FrameContext(T, INTR, left_gradients=Gradients.of(edge), extracted_left=aside))[0]
 
 
 def test_expected_only_where_the_segment_should_be_seen():
