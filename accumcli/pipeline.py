@@ -15,7 +15,7 @@ from .extract import ExtractParams, FrameSegments, extract_frame
 from .geometry import inside_box, invert, mean_transform, pose_error, rotate_vectors, transform_points
 from .line_model import (FrameContext, LineModelParams, LineSegmentType, direction_known, planes_from_image,
                          to_model)
-from .lines2d import StageTimes
+from .lines2d import Gradients, StageTimes
 from .recording import StereoFrame
 from .segments import Segments
 from .track import PoseEstimate, TrackParams, refine_pose
@@ -139,7 +139,7 @@ class LineAccumulation:
         elif self.params.motion == "tracked":
             T_camera_object, estimate = self._refined(frame, T_camera_object, extraction)
         context = FrameContext(T_camera_object, frame.intrinsics, frame.border_distance,
-                               left_gradients=extraction.gradients[0] if extraction.gradients is not None else None,
+                               left_gradients=self._left_gradients(frame, extraction),
                                extracted_left=extraction.left.select(extraction.left_index))
         segments = extraction.segments
         if self.params.box is not None:
@@ -160,6 +160,17 @@ class LineAccumulation:
         log.debug("frame %d: %s", frame.index, ", ".join(f"{k} {v}" for k, v in stats.__dict__.items()))
         return AccumulationStep(frame, extraction, T_camera_object, stats, estimate,
                                 len(extraction.segments) - len(segments))
+
+    def _left_gradients(self, frame: StereoFrame, extraction: FrameSegments) -> Gradients | None:
+        """The left image's gradients for ``expected``'s test of what the extraction missed (None when
+        ``unextracted_no_miss`` is off): the extraction's, or computed again where a replayed extraction
+        dropped them (``runs.accumulation.ExtractionStore``)."""
+        if not self.params.line_model.unextracted_no_miss:
+            return None
+        if extraction.gradients is not None:
+            return extraction.gradients[0]
+        border = frame.border_distance[0] if frame.border_distance is not None else None
+        return Gradients.of(frame.left, self.params.extract.lines, border_distance=border)
 
     def _written(self, uncertainty: bool = True) -> Segments:
         """The core's segments as ``to_model`` writes them, with this run's acceptance rules."""

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
+import numpy as np
 import pytest
 
 from accumcli.runs import FrameRange, accumulate_recording, extract_recording
@@ -16,6 +19,27 @@ def test_two_workers_give_the_same_model_and_frames_bytes(small_recording, tmp_p
         outputs[workers] = (model.read_bytes(), frames.read_bytes(), result.frames, sorted(result.times.seconds))
     assert outputs[1] == outputs[2]
     assert outputs[1][2] == 4 and "lines" in outputs[1][3]
+
+
+def test_an_extraction_sent_back_without_its_gradients_accumulates_as_with_them():
+    """Helpers send extractions back without their gradients (and ``--motion tracked`` replays them
+    so); the accumulation's test of what the extraction missed (``line_model.expected``) reads the
+    left image's gradients all the same, so the model does not depend on which process extracted."""
+    import copy
+
+    from accumcli.pipeline import LineAccumulation
+    from accumcli.recording import Recording
+
+    with_them, without = LineAccumulation(), LineAccumulation()
+    with Recording(Path(__file__).resolve().parents[1] / "sample_data" / "sim_box.mcap") as rec:
+        for frame in rec.frames(0, 12):
+            extraction = with_them.extract(frame)
+            sent = copy.copy(extraction)
+            sent.gradients = None
+            with_them.step(frame, frame.T_camera_object, extraction)
+            without.step(frame, frame.T_camera_object, sent)
+    a, b = with_them.model(), without.model()
+    assert len(a) == len(b) and np.array_equal(a.centers, b.centers) and np.array_equal(a.confidence, b.confidence)
 
 
 def test_this_process_and_a_ready_helper_share_the_frames_and_hand_them_back_in_order(small_recording, monkeypatch):
