@@ -104,8 +104,10 @@ class EntityType(Protocol[E]):
     def observe(self, observed: E, context: Any) -> E:
         """Observed entities made ready to join the model (e.g. per-entity state initialised)."""
 
-    def expected(self, model: E, context: Any) -> np.ndarray:
-        """(N,) bool: the frame described by ``context`` should have observed these entities."""
+    def expected(self, model: E, context: Any, confirmed: np.ndarray | None = None) -> np.ndarray:
+        """(N,) bool: the frame described by ``context`` should have observed these entities.
+        ``confirmed`` (N,) bool: those the frame did observe, whose answer does not matter (a type may
+        skip its costlier tests for them)."""
 
     def pair_cost(self, a: E, b: E) -> np.ndarray:
         """(N,) the metric's cost of the pairs (a[k], b[k]), row by row; inf where they do not correspond."""
@@ -264,9 +266,9 @@ class Accumulator(Generic[E]):
         widening = [w[explained] for w in widening]
         keep = one_to_one(all_mi, all_oi, cost)
         mi, oi = all_mi[keep], all_oi[keep]
-        expected = kind.expected(self.entities, context) if n_model else np.zeros(0, bool)
         confirmed = np.zeros(n_model, bool)
         confirmed[all_mi] = True
+        expected = kind.expected(self.entities, context, confirmed) if n_model else np.zeros(0, bool)
         missed = expected & ~confirmed & ~contradicted
         candidates = _sharing(all_mi, all_oi)
         if len(mi):

@@ -329,8 +329,9 @@ class LineSegmentType:
         lengths[mi] = hi - lo
         return Segments(model.frame_id, centers, directions, lengths, model.confidence, model.observations, extra)
 
-    def expected(self, model: Segments, context: FrameContext) -> np.ndarray:
-        """(N,) bool: the frame should have shown these model segments (see the module docstring)."""
+    def expected(self, model: Segments, context: FrameContext, confirmed: np.ndarray | None = None) -> np.ndarray:
+        """(N,) bool: the frame should have shown these model segments (see the module docstring); the
+        image test of what the extraction missed only for those not ``confirmed`` (N,) bool."""
         p, intr = self.params, context.intrinsics
         T = context.T_camera_object
         ends = transform_points(T, model.endpoints().reshape(-1, 3))     # camera frame, as segments_in_both_images
@@ -345,7 +346,7 @@ class LineSegmentType:
         in_aspect = projections >= np.cos(np.radians(p.aspect_margin_deg)) * np.linalg.norm(to_camera, axis=1)
         expected = inside & not_critical & in_aspect
         if p.unextracted_no_miss and context.left_gradients is not None and context.extracted_left is not None:
-            k = np.flatnonzero(expected)
+            k = np.flatnonzero(expected if confirmed is None else expected & ~confirmed)
             expected[k[_unextracted(uv_left[0::2][k], uv_left[1::2][k], context, p)]] = False
         return expected
 

@@ -77,7 +77,7 @@ class PointType:
     def observe(self, observed, context):
         return observed
 
-    def expected(self, model, context):
+    def expected(self, model, context, confirmed=None):
         return np.ones(len(model.xyz), bool)
 
 
