@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import logging
 from dataclasses import replace
 
 from ..errors import AccumError
@@ -12,14 +11,12 @@ from ..recording.tf_tree import frame_name
 from ..still_check import StillCheckParams, sampled_frames, still_check
 from .base import FrameRange, Progress, RecordingOptions, frame_range, no_progress
 
-log = logging.getLogger("accumcli")
-
 
 def check_model(model_path, recording, options: RecordingOptions = RecordingOptions(),
                 frames: FrameRange = FrameRange(), params: StillCheckParams = StillCheckParams(),
                 object_frame_of_model: bool = False, progress: Progress = no_progress) -> dict:
     """The model's accepted segments checked on ``params.frames`` frames of ``recording`` spread evenly
-    over ``frames`` (every ordered pair of them; ``still_check``): the shares of their length that move
+    over ``frames`` (every pair of them; ``still_check``): the shares of their length that move
     with the object, stay still (background the accumulation kept) or are undecided, with the counts.
     ``object_frame_of_model``: the object's frame is the one the model names (as ``track_recording``).
     Raises ``AccumError`` for a model with no accepted segment, or fewer than two frames with a pose."""
