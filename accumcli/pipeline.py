@@ -15,7 +15,7 @@ from .extract import ExtractParams, FrameSegments, extract_frame
 from .geometry import inside_box, invert, mean_transform, pose_error, rotate_vectors, transform_points
 from .line_model import (FrameContext, LineModelParams, LineSegmentType, direction_known, planes_from_image,
                          to_model)
-from .lines2d import Gradients, StageTimes
+from .lines2d import Gradients, Segments2D, StageTimes
 from .recording import StereoFrame
 from .segments import Segments
 from .track import PoseEstimate, TrackParams, refine_pose
@@ -139,8 +139,7 @@ class LineAccumulation:
         elif self.params.motion == "tracked":
             T_camera_object, estimate = self._refined(frame, T_camera_object, extraction)
         context = FrameContext(T_camera_object, frame.intrinsics, frame.border_distance,
-                               left_gradients=self._left_gradients(frame, extraction),
-                               extracted_left=extraction.left.select(extraction.left_index))
+                               *self._miss_test_inputs(frame, extraction))
         segments = extraction.segments
         if self.params.box is not None:
             segments = segments.select(inside_box(transform_points(invert(T_camera_object), segments.centers),
@@ -161,16 +160,18 @@ class LineAccumulation:
         return AccumulationStep(frame, extraction, T_camera_object, stats, estimate,
                                 len(extraction.segments) - len(segments))
 
-    def _left_gradients(self, frame: StereoFrame, extraction: FrameSegments) -> Gradients | None:
-        """The left image's gradients for ``expected``'s test of what the extraction missed (None when
-        ``unextracted_no_miss`` is off): the extraction's, or computed again where a replayed extraction
-        dropped them (``runs.accumulation.ExtractionStore``)."""
+    def _miss_test_inputs(self, frame: StereoFrame, extraction: FrameSegments
+                          ) -> tuple[Gradients | None, Segments2D | None]:
+        """The left image's gradients and the left pieces that became 3D segments, for ``expected``'s
+        test of what the extraction missed ((None, None) when ``unextracted_no_miss`` is off): the
+        extraction's gradients, or computed again where a helper process or a replay dropped them
+        (``runs.parallel``, ``runs.accumulation.ExtractionStore``)."""
         if not self.params.line_model.unextracted_no_miss:
-            return None
-        if extraction.gradients is not None:
-            return extraction.gradients[0]
-        border = frame.border_distance[0] if frame.border_distance is not None else None
-        return Gradients.of(frame.left, self.params.extract.lines, border_distance=border)
+            return None, None
+        gradients = extraction.gradients[0] if extraction.gradients is not None else Gradients.of(
+            frame.left, self.params.extract.lines,
+            border_distance=frame.border_distance[0] if frame.border_distance is not None else None)
+        return gradients, extraction.left.select(extraction.left_index)
 
     def _written(self, uncertainty: bool = True) -> Segments:
         """The core's segments as ``to_model`` writes them, with this run's acceptance rules."""

@@ -13,7 +13,7 @@ import logging
 import math
 import os
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 from ..errors import AccumError, InputError, is_whole_number
@@ -70,6 +70,16 @@ class RecordingOptions:
 
 
 _RANGE = re.compile(r"^\s*(\d*)\s*:\s*(\d*)\s*$")
+
+
+def options_for_model(options: RecordingOptions, model_frame_id: str, object_frame_of_model: bool) -> RecordingOptions:
+    """``options`` with the object's frame the one a model names (``model_frame_id``, as the
+    recording's tree keys it) where ``object_frame_of_model`` (the user gave no --object-frame)."""
+    model_frame = frame_name(model_frame_id)
+    if object_frame_of_model and model_frame and model_frame != options.object_frame:
+        log.info("the object's frame is the model's: %s (--object-frame names another)", model_frame)
+        return replace(options, object_frame=model_frame)
+    return options
 
 
 @dataclass(frozen=True)

@@ -2,14 +2,11 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 from ..errors import AccumError
 from ..lines2d import Gradients
 from ..model_io import read_model
-from ..recording.tf_tree import frame_name
 from ..still_check import StillCheckParams, sampled_frames, still_check
-from .base import FrameRange, Progress, RecordingOptions, frame_range, no_progress
+from .base import FrameRange, Progress, RecordingOptions, frame_range, no_progress, options_for_model
 
 
 def check_model(model_path, recording, options: RecordingOptions = RecordingOptions(),
@@ -25,9 +22,7 @@ def check_model(model_path, recording, options: RecordingOptions = RecordingOpti
     accepted = model.select(model.accepted)
     if not len(accepted):
         raise AccumError(f"{model_path}: the model has no accepted segment (confidence >= 0.5) to check")
-    model_frame = frame_name(model.frame_id)
-    if object_frame_of_model and model_frame and model_frame != options.object_frame:
-        options = replace(options, object_frame=model_frame)
+    options = options_for_model(options, model.frame_id, object_frame_of_model)
     with options.open(recording) as rec:
         total = frames.check(rec)
         wanted = set((frames.start + sampled_frames(total, params.frames)).tolist())

@@ -5,7 +5,7 @@ from __future__ import annotations
 import logging
 import os
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -19,7 +19,7 @@ from ..recording.tf_tree import frame_name
 from ..segments import Segments
 from ..track import PoseEstimate, PoseTracker, TrackParams
 from .base import (POSES_OUTPUTS, FrameRange, Progress, RecordingOptions, check_output_kinds, frame_range, in_frames,
-                   no_progress, nothing_done, path_list, write_pose_outputs)
+                   no_progress, nothing_done, options_for_model, path_list, write_pose_outputs)
 from .frame_logs import rerun_log
 
 log = logging.getLogger("accumcli")
@@ -91,9 +91,7 @@ def track_recording(model, recording, outputs=(), *, init_pose: np.ndarray | Non
     if not model.accepted.any():
         raise AccumError(f"{model_path}: the model has no accepted segment (confidence >= 0.5) to track")
     model_frame = frame_name(model.frame_id)   # as the recording's tree keys it
-    if object_frame_of_model and model_frame and model_frame != options.object_frame:
-        log.info("the object's frame is the model's: %s (--object-frame tracks it in another)", model.frame_id)
-        options = replace(options, object_frame=model_frame)
+    options = options_for_model(options, model.frame_id, object_frame_of_model)
     if init_pose is not None:
         init_pose = check_transform(init_pose, "init_pose")
     files = OutputSet([*outputs, rrd], inputs=[recording, model_file])
