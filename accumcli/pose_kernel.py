@@ -4,11 +4,13 @@ projection and residuals around them, compiled (numba).
 Why compiled: one iteration projects the samples into both images, picks each sample's nearest
 edge candidate along its normal, and sums the Tukey-weighted Jacobian products; in numpy that was
 some forty small array operations per iteration, about a third of the tracking time, for arithmetic
-that is one pass over the samples. This is the same arithmetic as ``track._residuals`` and
-``track._jacobian`` (which verification still uses), summed in one loop. The others replace numpy
-forms of some thirty small array operations per call each, run at every level and verification:
-with them ``make bench``'s tracking went from 24.4 to 28.7-30.2 frames/s, the poses bit for bit the same
-(tests/test_pose_kernel.py compares them with the numpy forms).
+that is one pass over the samples. The others replace numpy forms of some thirty small array
+operations per call each, run at every level and verification: with them ``make bench``'s tracking
+went from 24.4 to 28.7-30.2 frames/s, the poses bit for bit the same (tests/test_pose_kernel.py
+compares them with the numpy forms). ``gauss_newton_steps`` (the iterations of a level) and
+``verification_sums`` (2026-12-07) took it from 22.2 to 24.5 frames/s on a slower machine, the
+poses of the tracking bench and of dev_steps_track within 1e-15 of the numpy forms' (the tests
+compare them: tests/test_pose_kernel.py, tests/test_track.py).
 """
 
 from __future__ import annotations
@@ -153,7 +155,7 @@ def nearest_residuals(P, uv0, normal, candidates, fx, fy, cx, cy, baseline):  # 
     """Per image side (0 left, 1 right): the signed distance (2, S) from each camera-frame point's
     (``P`` (S, 3)) projection, along its ``normal`` (2, S, 2) since it was measured at ``uv0``
     (2, S, 2), to its nearest ``candidates`` (2, S, C) edge (the first of equals; NaN where it has
-    none): ``track._residuals``, bit for bit, in one pass."""
+    none), in one pass."""
     s_count = P.shape[0]
     out = np.full((2, s_count), np.nan)
     for side in range(2):
@@ -169,3 +171,84 @@ def nearest_residuals(P, uv0, normal, candidates, fx, fy, cx, cy, baseline):  # 
                 if abs(gap) < best:
                     best, out[side, s] = abs(gap), gap
     return out
+
+
+@kernel
+def gauss_newton_steps(points_obj, T, uv0, normal, candidates, expected, fx, fy, cx, cy, baseline, tukey,
+                       iterations, converged_rad, converged_m):  # pragma: no cover
+    """Up to ``iterations`` Gauss-Newton steps of ``normal_equations`` from the pose ``T`` (4, 4,
+    T_camera_object) for the object-frame sample points ``points_obj`` (S, 3) measured as given
+    (``uv0``, ``normal``, ``candidates``, ``expected``: ``normal_equations``'): each step rotates by
+    its rotation vector about the points' mean and translates (``geometry.rotation_about_point``, the
+    rotation by Rodrigues' formula), and the loop stops once a step turns less than
+    ``converged_rad`` and moves less than ``converged_m``. Returns (the pose (4, 4), not yet
+    orthonormalized; whether every step found 6 residuals or more: else the pose is that of the
+    step before). ``track._gauss_newton``'s loop without a prior, in one call: in Python each step
+    cost a dozen small numpy operations, a sixth of the tracking time."""
+    T = T.copy()
+    s_count = points_obj.shape[0]
+    P = np.empty((s_count, 3))
+    for _ in range(iterations):
+        pivot = np.zeros(3)
+        for s in range(s_count):
+            for r in range(3):
+                P[s, r] = (T[r, 0] * points_obj[s, 0] + T[r, 1] * points_obj[s, 1] + T[r, 2] * points_obj[s, 2]
+                           + T[r, 3])
+                pivot[r] += P[s, r]
+        pivot /= s_count
+        H, g, found, _, _ = normal_equations(P, pivot, uv0, normal, candidates, expected, fx, fy, cx, cy, baseline,
+                                             tukey)
+        if found < 6:
+            return T, False
+        step = np.linalg.solve(H, -g)
+        theta = np.sqrt(step[0] ** 2 + step[1] ** 2 + step[2] ** 2)
+        R = np.eye(3)
+        if theta > 1e-300:
+            k = step[:3] / theta
+            c, s_, c1 = np.cos(theta), np.sin(theta), 1.0 - np.cos(theta)
+            R[0, 0], R[0, 1], R[0, 2] = c + c1 * k[0] * k[0], c1 * k[0] * k[1] - s_ * k[2], c1 * k[0] * k[2] + s_ * k[1]
+            R[1, 0], R[1, 1], R[1, 2] = c1 * k[1] * k[0] + s_ * k[2], c + c1 * k[1] * k[1], c1 * k[1] * k[2] - s_ * k[0]
+            R[2, 0], R[2, 1], R[2, 2] = c1 * k[2] * k[0] - s_ * k[1], c1 * k[2] * k[1] + s_ * k[0], c + c1 * k[2] * k[2]
+        D = np.eye(4)
+        D[:3, :3] = R
+        D[:3, 3] = pivot + step[3:] - R @ pivot
+        T = D @ T
+        if theta < converged_rad and np.sqrt(step[3] ** 2 + step[4] ** 2 + step[5] ** 2) < converged_m:
+            break
+    return T, True
+
+
+@kernel
+def verification_sums(P, pivot, normal, residuals, owner, n_owner, tukey, fx, fy, baseline):  # pragma: no cover
+    """The sums of ``track._verify``'s last Gauss-Newton step over the residuals found in both
+    images (``residuals`` (2, S) px, NaN: none; ``P`` (S, 3) camera frame, ``pivot`` (3,),
+    ``normal`` (2, S, 2), each sample's model segment ``owner`` (S,) < ``n_owner``): (H (6, 6) =
+    sum w J J^T, sum w r^2, sum w, G (n_owner, 6) the per-segment sums of w r J), w Tukey's biweight
+    of ``tukey`` px and J ``normal_equations``' row. In numpy these were a Jacobian per image, a
+    stacked copy and six bincounts per verification."""
+    H = np.zeros((6, 6))
+    G = np.zeros((n_owner, 6))
+    J = np.empty(6)
+    swr2, sw = 0.0, 0.0
+    for side in range(2):
+        for s in range(P.shape[0]):
+            r = residuals[side, s]
+            if np.isnan(r):
+                continue
+            w = (1 - (r / tukey) ** 2) ** 2 if abs(r) < tukey else 0.0
+            if w == 0.0:
+                continue
+            X, Y, Z = P[s, 0] - baseline * side, P[s, 1], P[s, 2]
+            nu, nv = normal[side, s, 0] / Z, normal[side, s, 1] / Z
+            d0, d1 = fx * nu, fy * nv
+            d2 = -(fx * nu * X + fy * nv * Y) / Z
+            a0, a1, a2 = P[s, 0] - pivot[0], P[s, 1] - pivot[1], P[s, 2] - pivot[2]
+            J[0], J[1], J[2] = a1 * d2 - a2 * d1, a2 * d0 - a0 * d2, a0 * d1 - a1 * d0
+            J[3], J[4], J[5] = d0, d1, d2
+            swr2 += w * r * r
+            sw += w
+            for i in range(6):
+                G[owner[s], i] += w * r * J[i]
+                for j in range(6):
+                    H[i, j] += w * J[i] * J[j]
+    return H, swr2, sw, G

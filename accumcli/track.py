@@ -142,7 +142,8 @@ from scipy.spatial.transform import Rotation
 from .geometry import (check_points, check_transform, extrapolate, invert, make_transform, orthonormalized, pose_error,
                        quat_from_transform, rotate_vectors, rotation_about_point, transform_points)
 from .edge_search import edge_candidates
-from .pose_kernel import in_view, nearest_residuals, normal_equations, projected_normals, sample_points
+from .pose_kernel import (gauss_newton_steps, in_view, nearest_residuals, normal_equations, projected_normals,
+                          sample_points, verification_sums)
 from .lines2d import Gradients, LineParams, frame_gradients
 from .recording import StereoFrame, StereoIntrinsics
 from .segments import Segments
@@ -345,34 +346,6 @@ def _measure(points_cam, dirs_cam, intr: StereoIntrinsics, grads: tuple, search:
     return uv, normal, candidates
 
 
-def _residuals(P, measurements, intr: StereoIntrinsics):
-    """Per image: (signed distance (S,) from each point's current projection to its nearest
-    candidate edge along the normal, has-candidate mask (S,), normal (S, 2))
-    (``pose_kernel.nearest_residuals``; ``measurements``: ``_measure``'s)."""
-    uv0, normal, candidates = measurements
-    r = nearest_residuals(np.ascontiguousarray(P, np.float64), uv0, normal, candidates, float(intr.fx), float(intr.fy),
-                          float(intr.cx), float(intr.cy), float(intr.baseline))
-    found = ~np.isnan(r)
-    return [(np.where(found[side], r[side], 0.0), found[side], normal[side]) for side in (0, 1)]
-
-
-def _jacobian(points_cam: np.ndarray, normal: np.ndarray, intr: StereoIntrinsics, side: int,
-              pivot: np.ndarray) -> np.ndarray:
-    """(S, 6) derivative of n . pi(P) for an increment (rotation vector about ``pivot``,
-    translation), both in the camera frame."""
-    X, Y, Z = points_cam[:, 0] - intr.baseline * side, points_cam[:, 1], points_cam[:, 2]
-    J = np.empty((len(Z), 6))
-    nu, nv = normal[:, 0] / Z, normal[:, 1] / Z
-    dpi = J[:, 3:]                                     # n^T dpi/dP (S, 3), written in place
-    dpi[:, 0], dpi[:, 1] = intr.fx * nu, intr.fy * nv
-    dpi[:, 2] = -(intr.fx * nu * X + intr.fy * nv * Y) / Z
-    a = points_cam - pivot        # n^T dpi/dP (-[P - c]x) w = ((P - c) x dpi) . w
-    J[:, 0] = a[:, 1] * dpi[:, 2] - a[:, 2] * dpi[:, 1]
-    J[:, 1] = a[:, 2] * dpi[:, 0] - a[:, 0] * dpi[:, 2]
-    J[:, 2] = a[:, 0] * dpi[:, 1] - a[:, 1] * dpi[:, 0]
-    return J
-
-
 def _gradients(frame: StereoFrame, params: TrackParams, gradients: tuple | None) -> tuple[Gradients, Gradients]:
     """The frame's (left, right) gradients: ``gradients`` if given with the blur ``params`` asks
     for (tracking needs only gx, gy), else computed."""
@@ -510,8 +483,13 @@ def _gauss_newton(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, gra
     points_obj, dirs_obj, expected, _, _ = samples
     uv0, normal, candidates = _measure(transform_points(T, points_obj), rotate_vectors(T, dirs_obj), intr, grads,
                                        search, params)
-    if prior is not None:       # the prior's inverse variances per axis (rad^-2, m^-2)
-        inverse = 1 / np.repeat([np.radians(params.prior_deg), params.prior_mm / 1000], 3) ** 2
+    if prior is None:           # the loop below, compiled (``pose_kernel.gauss_newton_steps``)
+        T, ok = gauss_newton_steps(np.ascontiguousarray(points_obj, np.float64), T, uv0, normal, candidates, expected,
+                                   intr.fx, intr.fy, intr.cx, intr.cy, intr.baseline, float(tukey),
+                                   int(params.iterations_per_level), float(params.converged_rad),
+                                   float(params.converged_m))
+        return orthonormalized(T) if ok else None
+    inverse = 1 / np.repeat([np.radians(params.prior_deg), params.prior_mm / 1000], 3) ** 2   # rad^-2, m^-2
     for _ in range(params.iterations_per_level):
         P = transform_points(T, points_obj)
         pivot = P.sum(axis=0) / len(P)  # the mean; rotating about the object, not the camera, decouples the increments
@@ -520,12 +498,11 @@ def _gauss_newton(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, gra
                                                  intr.cx, intr.cy, intr.baseline, float(tukey))
         if found < 6:
             return None
-        if prior is not None:
-            sigma2 = max(swr2 / max(sw, 1e-9), 0.01)
-            D = T @ invert(prior)                   # the pose's departure from the prior, camera frame
-            departure = np.concatenate([Rotation.from_matrix(D[:3, :3]).as_rotvec(), D[:3, :3] @ pivot + D[:3, 3] - pivot])
-            H += sigma2 * np.diag(inverse)
-            g += sigma2 * inverse * departure
+        sigma2 = max(swr2 / max(sw, 1e-9), 0.01)
+        D = T @ invert(prior)                   # the pose's departure from the prior, camera frame
+        departure = np.concatenate([Rotation.from_matrix(D[:3, :3]).as_rotvec(), D[:3, :3] @ pivot + D[:3, 3] - pivot])
+        H += sigma2 * np.diag(inverse)
+        g += sigma2 * inverse * departure
         step = np.linalg.solve(H, -g)
         T = rotation_about_point(step[:3], pivot, step[3:]) @ T
         if np.linalg.norm(step[:3]) < params.converged_rad and np.linalg.norm(step[3:]) < params.converged_m:
@@ -588,7 +565,7 @@ def _verify(T: np.ndarray, points_obj: np.ndarray, measurements, intr: StereoInt
     ``found_rate`` (S,) if given, ``coverage_found``), the
     standard deviations of a Gauss-Newton increment (per axis the larger of ``sigma^2 (J^T W J)^-1``,
     sigma^2 the Tukey-weighted residual variance with 6 degrees of freedom removed, and the
-    variance clustered by the model segment ``owner`` (S,) of each sample, ``_clustered_variance``)
+    variance clustered by the model segment ``owner`` (S,) of each sample, ``_sandwich``)
     and the status of this one pose ('tracked' or 'lost'; the tracker may make it 'ambiguous'), with the
     share of each segment's counted samples on edges in both images (``segments`` (K,): the indices in
     the accepted model of those ``owner`` (S,) indexes; ``PoseEstimate.segment_found``). W
@@ -613,28 +590,28 @@ def _verify(T: np.ndarray, points_obj: np.ndarray, measurements, intr: StereoInt
     1.75: 0.66 and 0.69, with 3.4 % and 3.1 % of the axes beyond three of them (normal: 0.3 %: the
     tails are heavier). The limits are scaled with it (0.48 deg and 1.6 mm before), so that the
     verification is the same."""
-    P = transform_points(T, points_obj)
+    P = np.ascontiguousarray(transform_points(T, points_obj), np.float64)
     pivot = P.sum(axis=0) / len(P)
-    per_side = _residuals(P, measurements, intr)
-    near = [found & (np.abs(r) <= params.inlier_px) for r, found, _ in per_side]
+    uv0, normal, candidates = measurements
+    residual = nearest_residuals(P, uv0, normal, candidates, float(intr.fx), float(intr.fy), float(intr.cx),
+                                 float(intr.cy), float(intr.baseline))      # (2, S) px, NaN: no edge found
+    found = ~np.isnan(residual)
+    near = found & (np.abs(np.where(found, residual, 0.0)) <= params.inlier_px)
     both = near[0] & near[1]
     coverage = _weighted_share(expected, both)
     coverage_found = float("nan") if found_rate is None else _weighted_share(expected * found_rate, both)
-    r = np.abs(np.concatenate([res[found] for res, found, _ in per_side]))
+    r = np.abs(residual[found])          # the left image's, then the right's
     inliers = r <= params.inlier_px
     rms = float(np.sqrt(np.mean(r[inliers] ** 2))) if inliers.any() else float("inf")
-    J = np.vstack([_jacobian(P, normal, intr, side, pivot)[found] for side, (_, found, normal) in enumerate(per_side)])
-    signed = np.concatenate([res[found] for res, found, _ in per_side])
-    w = np.where(np.abs(signed) < tukey, (1 - (signed / tukey) ** 2) ** 2, 0.0)
+    H, swr2, sw, per_segment = verification_sums(P, pivot, normal, residual, owner, len(segments), float(tukey),
+                                                 float(intr.fx), float(intr.fy), float(intr.baseline))
     std_rotation = std_translation = information = None
-    if w.sum() > 6:
-        H = (J * w[:, None]).T @ J
-        sigma2 = float(np.sum(w * signed ** 2) / (w.sum() - 6))
+    if sw > 6:
+        sigma2 = float(swr2 / (sw - 6))
         information = H / max(sigma2, 1e-12)
         if np.linalg.cond(H) < 1e12:
             H_inv = np.linalg.inv(H)
-            rows = np.concatenate([owner[found] for _, found, _ in per_side])
-            variance = np.maximum(np.diag(H_inv) * sigma2, _clustered_variance(H_inv, J, w * signed, rows))
+            variance = np.maximum(np.diag(H_inv) * sigma2, _sandwich(H_inv, per_segment))
             std = np.sqrt(np.maximum(variance, 0.0)) * params.std_scale
             std_rotation, std_translation = np.degrees(std[:3]), std[3:] * 1000
     estimate = PoseEstimate(T, rms, int(inliers.sum()), len(r), "lost", coverage=coverage, coverage_found=coverage_found,
@@ -658,15 +635,12 @@ def _found_per_segment(on_edges: np.ndarray, expected: np.ndarray, owner: np.nda
     return segments[shown], hits[shown] / expecting[shown]
 
 
-def _clustered_variance(H_inv: np.ndarray, J: np.ndarray, weighted_residual: np.ndarray,
-                        cluster: np.ndarray) -> np.ndarray:
+def _sandwich(H_inv: np.ndarray, g: np.ndarray) -> np.ndarray:
     """(6,) the cluster-robust ("sandwich") variances of a Gauss-Newton increment, ``H^-1 M H^-1``
-    with ``M`` the sum over clusters (K,) of ``g g^T``, ``g`` a cluster's sum of ``J_i w_i r_i``,
-    times K / (K - 6); zeros with 6 clusters or fewer. Rows (J (R, 6), ``weighted_residual`` (R,))
-    of one cluster share its error, e.g. the samples of one model segment."""
-    n = int(cluster.max(initial=-1)) + 1
-    terms = J * weighted_residual[:, None]     # summed per cluster in row order, as np.add.at would, 3x faster
-    g = np.stack([np.bincount(cluster, weights=terms[:, c], minlength=n) for c in range(6)], axis=1)
+    with ``M`` the sum over clusters (K,) of ``g g^T``, ``g`` (K, 6) a cluster's sum of ``J_i w_i r_i``
+    (``pose_kernel.verification_sums``; a row of zeros: no sample of the cluster weighs), times
+    K / (K - 6); zeros with 6 clusters or fewer. The samples of one cluster (a model segment) share its
+    error."""
     k = int(np.count_nonzero(np.any(g != 0, axis=1)))
     if k <= 6:
         return np.zeros(6)

@@ -94,3 +94,38 @@ def test_projected_normals_and_nearest_residuals_equal_the_numpy_forms_bit_for_b
         ref = np.take_along_axis(gaps, np.argmin(distance, axis=1)[:, None], axis=1)[:, 0]
         assert np.array_equal(got[side], ref, equal_nan=True)
     assert np.isnan(got).any() and not np.isnan(got).all()
+
+
+def test_gauss_newton_steps_are_the_python_loop_of_normal_equations_and_rotations_about_the_pivot():
+    """The compiled loop against the loop it replaced: the same poses (to rounding) after each
+    iteration count, and the stop when a step finds fewer than 6 residuals."""
+    from accumcli.geometry import rotation_about_point
+    from accumcli.pose_kernel import gauss_newton_steps, normal_equations
+
+    rng = np.random.default_rng(5)
+    points = rng.uniform(-0.04, 0.04, (200, 3))
+    T_true, T = _pose(), make_transform(Rotation.from_rotvec([0.21, -0.29, 0.1]).as_matrix(), [0.021, -0.01, 0.602])
+    P_true = transform_points(T_true, points)
+    uv0, normal = projected_normals(transform_points(T, points), rotate_vectors(T, rng.normal(size=(200, 3))),
+                                    INTR.fx, INTR.fy, INTR.cx, INTR.cy, INTR.baseline, 0.002)
+    truth_uv = np.stack(INTR.project(P_true)[:2])
+    candidates = np.sum((truth_uv - uv0) * normal, axis=2)[:, :, None] + rng.normal(0, 0.1, (2, 200, 2))
+    expected = rng.uniform(0.5, 1.0, 200)
+    args = (INTR.fx, INTR.fy, INTR.cx, INTR.cy, INTR.baseline, 6.0)
+    for iterations in (1, 3, 12):
+        loop = T.copy()
+        for _ in range(iterations):
+            P = transform_points(loop, points)
+            pivot = P.sum(axis=0) / len(P)
+            H, g, *_ = normal_equations(P, pivot, uv0, normal, candidates, expected, *args)
+            step = np.linalg.solve(H, -g)
+            loop = rotation_about_point(step[:3], pivot, step[3:]) @ loop
+            if np.linalg.norm(step[:3]) < 1e-9 and np.linalg.norm(step[3:]) < 1e-9:
+                break
+        compiled, ok = gauss_newton_steps(points, T, uv0, normal, candidates, expected, *args, iterations, 1e-9, 1e-9)
+        assert ok
+        np.testing.assert_allclose(compiled, loop, rtol=0, atol=1e-12)
+    assert np.degrees(np.linalg.norm(Rotation.from_matrix(compiled[:3, :3] @ T_true[:3, :3].T).as_rotvec())) < 0.2
+    none_found = np.full_like(candidates, np.nan)
+    _, ok = gauss_newton_steps(points, T, uv0, normal, none_found, expected, *args, 12, 1e-9, 1e-9)
+    assert not ok

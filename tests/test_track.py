@@ -1038,15 +1038,44 @@ def test_edge_search_finds_nothing_far_outside_the_image_or_at_nan():
     assert np.isnan(edge_candidates(Gradients.of(image).gxy, uv, normal, 40, 3.0, 0.85, 3)).all()
 
 
-def test_compiled_normal_equations_sum_what_verification_measures():
-    """The Gauss-Newton kernel and verification's numpy residuals and Jacobians (``_residuals``,
-    ``_jacobian``) are two writings of one model: the nearest candidate (NaN where none), Tukey
-    weights times the expected weights, the pivot's rotation and the right camera's baseline."""
-    from accumcli.pose_kernel import normal_equations
-    from accumcli.recording.calibration import StereoIntrinsics
-    from accumcli.track import _jacobian, _residuals
+def _residuals(P, measurements, intr):
+    """Per image, in numpy: (signed distance (S,) from each point's projection to its nearest candidate
+    edge along the normal, 0 where none; has-candidate mask (S,); normal (S, 2))."""
+    uv0, normal, candidates = measurements
+    out = []
+    for side in (0, 1):
+        uv = np.stack(intr.project(P)[:2])[side]
+        moved = np.sum((uv - uv0[side]) * normal[side], axis=1)
+        gap = moved[:, None] - candidates[side]
+        nearest = np.argmin(np.where(np.isnan(gap), np.inf, np.abs(gap)), axis=1)
+        r = gap[np.arange(len(gap)), nearest]
+        found = ~np.isnan(r)
+        out.append((np.where(found, r, 0.0), found, normal[side]))
+    return out
 
-    rng = np.random.default_rng(1)
+
+def _jacobian(points_cam, normal, intr, side, pivot):
+    """(S, 6) derivative of n . pi(P) for an increment (rotation vector about ``pivot``, translation),
+    in numpy: the model the kernels compute."""
+    X, Y, Z = points_cam[:, 0] - intr.baseline * side, points_cam[:, 1], points_cam[:, 2]
+    nu, nv = normal[:, 0] / Z, normal[:, 1] / Z
+    dpi = np.stack([intr.fx * nu, intr.fy * nv, -(intr.fx * nu * X + intr.fy * nv * Y) / Z], axis=1)
+    return np.concatenate([np.cross(points_cam - pivot, dpi), dpi], axis=1)
+
+
+def _clustered_variance(H_inv, J, weighted_residual, cluster):
+    """``track._sandwich`` of the per-cluster sums of ``J_i w_i r_i``, in numpy."""
+    from accumcli.track import _sandwich
+
+    g = np.zeros((int(cluster.max(initial=-1)) + 1, 6))
+    np.add.at(g, cluster, J * weighted_residual[:, None])
+    return _sandwich(H_inv, g)
+
+
+def _random_measurements(seed=1):
+    from accumcli.recording.calibration import StereoIntrinsics
+
+    rng = np.random.default_rng(seed)
     intr = StereoIntrinsics(fx=600.0, fy=610.0, cx=320.0, cy=240.0, baseline=0.08, width=640, height=480)
     measured_at = rng.normal([0, 0, 0.6], [0.05, 0.05, 0.03], (300, 3))
     uv0 = np.stack(intr.project(measured_at)[:2])
@@ -1055,8 +1084,42 @@ def test_compiled_normal_equations_sum_what_verification_measures():
     candidates = rng.normal(0, 3, (2, 300, 3))
     candidates[rng.random((2, 300, 3)) < 0.4] = np.nan
     candidates[:, :20] = np.nan               # some samples found no edge at all
-    expected = rng.random(300)
     P = measured_at + rng.normal(0, 0.001, (300, 3))
+    return intr, uv0, normal, candidates, P, rng
+
+
+def test_verification_sums_are_the_numpy_jacobians_weights_and_per_segment_sums():
+    """``pose_kernel.verification_sums`` against the numpy forms: H = sum w J J^T over the residuals
+    found in both images (Tukey weights, no expected weights: verification's conservative figure),
+    sum w r^2, sum w, and per model segment the sum of w r J."""
+    from accumcli.pose_kernel import nearest_residuals, verification_sums
+
+    intr, uv0, normal, candidates, P, rng = _random_measurements(2)
+    owner = rng.integers(0, 40, 300)
+    pivot = P.mean(axis=0)
+    residual = nearest_residuals(P, uv0, normal, candidates, intr.fx, intr.fy, intr.cx, intr.cy, intr.baseline)
+    H, swr2, sw, G = verification_sums(P, pivot, normal, residual, owner, 40, 4.0, intr.fx, intr.fy, intr.baseline)
+    rows = [(_jacobian(P, n, intr, side, pivot)[f], r[f], owner[f])
+            for side, (r, f, n) in enumerate(_residuals(P, (uv0, normal, candidates), intr))]
+    J, r, o = (np.concatenate(x) for x in zip(*rows))
+    w = np.where(np.abs(r) < 4.0, (1 - (r / 4.0) ** 2) ** 2, 0.0)
+    assert 0 < np.count_nonzero(w) < len(w)      # some residuals beyond the Tukey width: weight 0
+    G_numpy = np.zeros((40, 6))
+    np.add.at(G_numpy, o, J * (w * r)[:, None])
+    H_numpy = (J * w[:, None]).T @ J
+    np.testing.assert_allclose(H, H_numpy, rtol=0, atol=1e-10 * np.abs(H_numpy).max())
+    np.testing.assert_allclose(G, G_numpy, rtol=0, atol=1e-10 * np.abs(G_numpy).max())
+    assert swr2 == pytest.approx(np.sum(w * r * r), rel=1e-12) and sw == pytest.approx(np.sum(w), rel=1e-12)
+
+
+def test_compiled_normal_equations_sum_what_verification_measures():
+    """The Gauss-Newton kernel and the numpy residuals and Jacobians (``_residuals``, ``_jacobian``
+    above) are two writings of one model: the nearest candidate (NaN where none), Tukey weights
+    times the expected weights, the pivot's rotation and the right camera's baseline."""
+    from accumcli.pose_kernel import normal_equations
+
+    intr, uv0, normal, candidates, P, rng = _random_measurements(1)
+    expected = rng.random(300)
     pivot = P.mean(axis=0)
     H, g, found, _, _ = normal_equations(P, pivot, uv0, normal, candidates, expected, intr.fx, intr.fy,
                                          intr.cx, intr.cy, intr.baseline, 4.0)
@@ -1074,8 +1137,6 @@ def test_clustered_variance_grows_only_where_a_segment_s_samples_err_together():
     """Independent residuals: the clustered variance is about the classical one. The same residual
     spread, but shared by the samples of each segment (a misplaced model segment): about the
     samples-per-segment times larger, which the classical figure cannot see."""
-    from accumcli.track import _clustered_variance
-
     rng = np.random.default_rng(3)
     segments, per_segment = 60, 8
     cluster = np.repeat(np.arange(segments), per_segment)
