@@ -43,8 +43,8 @@ def edge_candidates(gxy, uv, normal, half_width, min_gradient, min_orientation_c
 
     A point whose whole search lies inside the image reads without ``_bilinear``'s guards (the
     same arithmetic: the guards change nothing there), and the maxima are listed once, then ranked:
-    a third of the time of guarding every read and scanning every position per candidate, the
-    same bits."""
+    the same bits in two thirds of the time of guarding every read and scanning every position per
+    candidate (400 calls recorded from the tracking bench, 0.40 -> 0.27 s)."""
     h, w = gxy.shape[0], gxy.shape[1]
     s_count = uv.shape[0]
     k_count = 2 * half_width + 1
@@ -96,4 +96,3 @@ def edge_candidates(gxy, uv, normal, half_width, min_gradient, min_orientation_c
             offset = min(max(offset, -0.5), 0.5)
             out[s, c] = best_k - half_width + offset
     return out
-
