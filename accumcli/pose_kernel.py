@@ -7,10 +7,12 @@ some forty small array operations per iteration, about a third of the tracking t
 that is one pass over the samples. The others replace numpy forms of some thirty small array
 operations per call each, run at every level and verification: with them ``make bench``'s tracking
 went from 24.4 to 28.7-30.2 frames/s, the poses bit for bit the same (tests/test_pose_kernel.py
-compares them with the numpy forms). ``gauss_newton_steps`` (the iterations of a level) and
-``verification_sums`` (2026-12-07) took it from 22.2 to 24.5 frames/s on a slower machine, the
-poses of the tracking bench and of dev_steps_track within 1e-15 of the numpy forms' (the tests
-compare them: tests/test_pose_kernel.py, tests/test_track.py).
+compares them with the numpy forms). ``gauss_newton_steps`` (a level's iterations, with the prior
+of ``--motion tracked``'s repair too) and ``verification_sums`` (2026-12-07), with the edge search's
+rewrite (``edge_search``), took it from 25.8 to 33.4 frames/s on a slower machine, the poses of the
+tracking bench and of dev_steps_track within 1e-15 of the numpy forms' (with a prior 4e-14: the
+rotation vector of its departure by the skew part's formula, not scipy's; the tests compare them:
+tests/test_pose_kernel.py, tests/test_track.py).
 """
 
 from __future__ import annotations
@@ -47,13 +49,8 @@ def normal_equations(P, pivot, uv0, normal, candidates, expected, fx, fy, cx, cy
             if best == np.inf:
                 continue
             found += 1
-            nu, nv = nx / Z, ny / Z
-            d0, d1 = fx * nu, fy * nv
-            d2 = -(fx * nu * X + fy * nv * Y) / Z
-            a0, a1, a2 = P[s, 0] - pivot[0], P[s, 1] - pivot[1], P[s, 2] - pivot[2]
-            J[0], J[1], J[2] = a1 * d2 - a2 * d1, a2 * d0 - a0 * d2, a0 * d1 - a1 * d0
-            J[3], J[4], J[5] = d0, d1, d2
-            w = (1 - (r / tukey) ** 2) ** 2 * expected[s] if abs(r) < tukey else 0.0
+            _jacobian_row(P, s, side, pivot, normal, fx, fy, baseline, J)
+            w = _tukey(r, tukey) * expected[s]
             swr2 += w * r * r
             sw += w
             for i in range(6):
@@ -175,7 +172,7 @@ def nearest_residuals(P, uv0, normal, candidates, fx, fy, cx, cy, baseline):  # 
 
 @kernel
 def gauss_newton_steps(points_obj, T, uv0, normal, candidates, expected, fx, fy, cx, cy, baseline, tukey,
-                       iterations, converged_rad, converged_m):  # pragma: no cover
+                       iterations, converged_rad, converged_m, prior_inverse, prior_information):  # pragma: no cover
     """Up to ``iterations`` Gauss-Newton steps of ``normal_equations`` from the pose ``T`` (4, 4,
     T_camera_object) for the object-frame sample points ``points_obj`` (S, 3) measured as given
     (``uv0``, ``normal``, ``candidates``, ``expected``: ``normal_equations``'): each step rotates by
@@ -183,8 +180,12 @@ def gauss_newton_steps(points_obj, T, uv0, normal, candidates, expected, fx, fy,
     rotation by Rodrigues' formula), and the loop stops once a step turns less than
     ``converged_rad`` and moves less than ``converged_m``. Returns (the pose (4, 4), not yet
     orthonormalized; whether every step found 6 residuals or more: else the pose is that of the
-    step before). ``track._gauss_newton``'s loop without a prior, in one call: in Python each step
-    cost a dozen small numpy operations, a sixth of the tracking time."""
+    step before). With a prior (``prior_information`` (6,), its inverse variances per camera axis,
+    rad^-2 and m^-2, all zero for none; ``prior_inverse`` (4, 4) the inverse of its centre pose), each
+    step also weighs the pose's departure from it (rotation vector of ``T prior^-1`` and the pivot's
+    move), scaled into pixels by the step's weighted residual variance (floor 0.1 px):
+    ``track._gauss_newton``'s loop in one call; in Python each step cost a dozen small numpy
+    operations, a sixth of the tracking time."""
     T = T.copy()
     s_count = points_obj.shape[0]
     P = np.empty((s_count, 3))
@@ -196,10 +197,20 @@ def gauss_newton_steps(points_obj, T, uv0, normal, candidates, expected, fx, fy,
                            + T[r, 3])
                 pivot[r] += P[s, r]
         pivot /= s_count
-        H, g, found, _, _ = normal_equations(P, pivot, uv0, normal, candidates, expected, fx, fy, cx, cy, baseline,
-                                             tukey)
+        H, g, found, swr2, sw = normal_equations(P, pivot, uv0, normal, candidates, expected, fx, fy, cx, cy,
+                                                 baseline, tukey)
         if found < 6:
             return T, False
+        if prior_information.any():
+            sigma2 = max(swr2 / max(sw, 1e-9), 0.01)
+            D = T @ prior_inverse                 # the pose's departure from the prior, camera frame
+            departure = np.empty(6)
+            departure[:3] = _rotation_vector(D)
+            for i in range(3):
+                departure[3 + i] = D[i, 0] * pivot[0] + D[i, 1] * pivot[1] + D[i, 2] * pivot[2] + D[i, 3] - pivot[i]
+            for i in range(6):
+                H[i, i] += sigma2 * prior_information[i]
+                g[i] += sigma2 * prior_information[i] * departure[i]
         step = np.linalg.solve(H, -g)
         theta = np.sqrt(step[0] ** 2 + step[1] ** 2 + step[2] ** 2)
         R = np.eye(3)
@@ -235,16 +246,10 @@ def verification_sums(P, pivot, normal, residuals, owner, n_owner, tukey, fx, fy
             r = residuals[side, s]
             if np.isnan(r):
                 continue
-            w = (1 - (r / tukey) ** 2) ** 2 if abs(r) < tukey else 0.0
+            w = _tukey(r, tukey)
             if w == 0.0:
                 continue
-            X, Y, Z = P[s, 0] - baseline * side, P[s, 1], P[s, 2]
-            nu, nv = normal[side, s, 0] / Z, normal[side, s, 1] / Z
-            d0, d1 = fx * nu, fy * nv
-            d2 = -(fx * nu * X + fy * nv * Y) / Z
-            a0, a1, a2 = P[s, 0] - pivot[0], P[s, 1] - pivot[1], P[s, 2] - pivot[2]
-            J[0], J[1], J[2] = a1 * d2 - a2 * d1, a2 * d0 - a0 * d2, a0 * d1 - a1 * d0
-            J[3], J[4], J[5] = d0, d1, d2
+            _jacobian_row(P, s, side, pivot, normal, fx, fy, baseline, J)
             swr2 += w * r * r
             sw += w
             for i in range(6):
@@ -252,3 +257,32 @@ def verification_sums(P, pivot, normal, residuals, owner, n_owner, tukey, fx, fy
                 for j in range(6):
                     H[i, j] += w * J[i] * J[j]
     return H, swr2, sw, G
+
+
+@kernel
+def _jacobian_row(P, s, side, pivot, normal, fx, fy, baseline, J):  # pragma: no cover
+    """Into ``J`` (6,): the derivative of sample ``s``'s residual along its ``normal`` in image ``side``
+    (0 left, 1 right) for an increment (rotation vector about ``pivot``, translation), camera frame."""
+    X, Y, Z = P[s, 0] - baseline * side, P[s, 1], P[s, 2]
+    nu, nv = normal[side, s, 0] / Z, normal[side, s, 1] / Z
+    d0, d1 = fx * nu, fy * nv
+    d2 = -(fx * nu * X + fy * nv * Y) / Z
+    a0, a1, a2 = P[s, 0] - pivot[0], P[s, 1] - pivot[1], P[s, 2] - pivot[2]
+    J[0], J[1], J[2] = a1 * d2 - a2 * d1, a2 * d0 - a0 * d2, a0 * d1 - a1 * d0
+    J[3], J[4], J[5] = d0, d1, d2
+
+
+@kernel
+def _tukey(r, tukey):  # pragma: no cover
+    """Tukey's biweight of a residual ``r`` px for the width ``tukey`` px."""
+    return (1 - (r / tukey) ** 2) ** 2 if abs(r) < tukey else 0.0
+
+
+@kernel
+def _rotation_vector(T):  # pragma: no cover
+    """(3,) the rotation vector (rad) of ``T``'s rotation, from its skew part and trace (an angle well
+    short of a half turn: a Gauss-Newton step's departure from its prior)."""
+    v = np.array([T[2, 1] - T[1, 2], T[0, 2] - T[2, 0], T[1, 0] - T[0, 1]])     # 2 sin(angle) axis
+    sine = np.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2) / 2
+    angle = np.arctan2(sine, (T[0, 0] + T[1, 1] + T[2, 2] - 1) / 2)
+    return v / 2 if sine < 1e-12 else v * (angle / (2 * sine))

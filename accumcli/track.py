@@ -137,7 +137,6 @@ from typing import Callable
 
 import numpy as np
 from scipy.spatial import cKDTree
-from scipy.spatial.transform import Rotation
 
 from .geometry import (check_points, check_transform, extrapolate, invert, make_transform, orthonormalized, pose_error,
                        quat_from_transform, rotate_vectors, rotation_about_point, transform_points)
@@ -483,31 +482,13 @@ def _gauss_newton(accepted: Segments, T: np.ndarray, intr: StereoIntrinsics, gra
     points_obj, dirs_obj, expected, _, _ = samples
     uv0, normal, candidates = _measure(transform_points(T, points_obj), rotate_vectors(T, dirs_obj), intr, grads,
                                        search, params)
-    if prior is None:           # the loop below, compiled (``pose_kernel.gauss_newton_steps``)
-        T, ok = gauss_newton_steps(np.ascontiguousarray(points_obj, np.float64), T, uv0, normal, candidates, expected,
-                                   intr.fx, intr.fy, intr.cx, intr.cy, intr.baseline, float(tukey),
-                                   int(params.iterations_per_level), float(params.converged_rad),
-                                   float(params.converged_m))
-        return orthonormalized(T) if ok else None
-    inverse = 1 / np.repeat([np.radians(params.prior_deg), params.prior_mm / 1000], 3) ** 2   # rad^-2, m^-2
-    for _ in range(params.iterations_per_level):
-        P = transform_points(T, points_obj)
-        pivot = P.sum(axis=0) / len(P)  # the mean; rotating about the object, not the camera, decouples the increments
-        # expected: a segment beyond its cone of views pulls less (expected_weights)
-        H, g, found, swr2, sw = normal_equations(P, pivot, uv0, normal, candidates, expected, intr.fx, intr.fy,
-                                                 intr.cx, intr.cy, intr.baseline, float(tukey))
-        if found < 6:
-            return None
-        sigma2 = max(swr2 / max(sw, 1e-9), 0.01)
-        D = T @ invert(prior)                   # the pose's departure from the prior, camera frame
-        departure = np.concatenate([Rotation.from_matrix(D[:3, :3]).as_rotvec(), D[:3, :3] @ pivot + D[:3, 3] - pivot])
-        H += sigma2 * np.diag(inverse)
-        g += sigma2 * inverse * departure
-        step = np.linalg.solve(H, -g)
-        T = rotation_about_point(step[:3], pivot, step[3:]) @ T
-        if np.linalg.norm(step[:3]) < params.converged_rad and np.linalg.norm(step[3:]) < params.converged_m:
-            break
-    return orthonormalized(T)
+    information = np.zeros(6) if prior is None else \
+        1 / np.repeat([np.radians(params.prior_deg), params.prior_mm / 1000], 3) ** 2    # rad^-2, m^-2
+    T, ok = gauss_newton_steps(np.ascontiguousarray(points_obj, np.float64), T, uv0, normal, candidates, expected,
+                               intr.fx, intr.fy, intr.cx, intr.cy, intr.baseline, float(tukey),
+                               int(params.iterations_per_level), float(params.converged_rad), float(params.converged_m),
+                               np.eye(4) if prior is None else invert(prior), information)
+    return orthonormalized(T) if ok else None
 
 
 def _perturbed(T: np.ndarray, angle: float) -> list[np.ndarray]:

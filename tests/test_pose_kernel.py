@@ -2,6 +2,7 @@
 computed before them (``track`` used these numpy forms until 2026-12-06)."""
 
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
 from accumcli.geometry import invert, make_transform, rotate_vectors, transform_points
@@ -96,9 +97,11 @@ def test_projected_normals_and_nearest_residuals_equal_the_numpy_forms_bit_for_b
     assert np.isnan(got).any() and not np.isnan(got).all()
 
 
-def test_gauss_newton_steps_are_the_python_loop_of_normal_equations_and_rotations_about_the_pivot():
+@pytest.mark.parametrize("with_prior", [False, True])
+def test_gauss_newton_steps_are_the_python_loop_of_normal_equations_and_rotations_about_the_pivot(with_prior):
     """The compiled loop against the loop it replaced: the same poses (to rounding) after each
-    iteration count, and the stop when a step finds fewer than 6 residuals."""
+    iteration count, with and without a prior about another pose, and the stop when a step finds
+    fewer than 6 residuals."""
     from accumcli.geometry import rotation_about_point
     from accumcli.pose_kernel import gauss_newton_steps, normal_equations
 
@@ -112,20 +115,32 @@ def test_gauss_newton_steps_are_the_python_loop_of_normal_equations_and_rotation
     candidates = np.sum((truth_uv - uv0) * normal, axis=2)[:, :, None] + rng.normal(0, 0.1, (2, 200, 2))
     expected = rng.uniform(0.5, 1.0, 200)
     args = (INTR.fx, INTR.fy, INTR.cx, INTR.cy, INTR.baseline, 6.0)
+    prior = make_transform(Rotation.from_rotvec([0.22, -0.3, 0.09]).as_matrix(), [0.02, -0.011, 0.6])
+    information = (1 / np.repeat([np.radians(0.5), 0.002], 3) ** 2) if with_prior else np.zeros(6)
     for iterations in (1, 3, 12):
         loop = T.copy()
         for _ in range(iterations):
             P = transform_points(loop, points)
             pivot = P.sum(axis=0) / len(P)
-            H, g, *_ = normal_equations(P, pivot, uv0, normal, candidates, expected, *args)
+            H, g, _, swr2, sw = normal_equations(P, pivot, uv0, normal, candidates, expected, *args)
+            sigma2 = max(swr2 / max(sw, 1e-9), 0.01)
+            D = loop @ invert(prior)
+            departure = np.concatenate([Rotation.from_matrix(D[:3, :3]).as_rotvec(), D[:3, :3] @ pivot + D[:3, 3] - pivot])
+            H, g = H + sigma2 * np.diag(information), g + sigma2 * information * departure
             step = np.linalg.solve(H, -g)
             loop = rotation_about_point(step[:3], pivot, step[3:]) @ loop
             if np.linalg.norm(step[:3]) < 1e-9 and np.linalg.norm(step[3:]) < 1e-9:
                 break
-        compiled, ok = gauss_newton_steps(points, T, uv0, normal, candidates, expected, *args, iterations, 1e-9, 1e-9)
+        compiled, ok = gauss_newton_steps(points, T, uv0, normal, candidates, expected, *args, iterations, 1e-9, 1e-9,
+                                          invert(prior), information)
         assert ok
         np.testing.assert_allclose(compiled, loop, rtol=0, atol=1e-12)
     assert np.degrees(np.linalg.norm(Rotation.from_matrix(compiled[:3, :3] @ T_true[:3, :3].T).as_rotvec())) < 0.2
+    if with_prior:   # the prior counts: the poses with and without it differ (and each equals its loop above)
+        free, _ = gauss_newton_steps(points, T, uv0, normal, candidates, expected, *args, 12, 1e-9, 1e-9,
+                                     invert(prior), np.zeros(6))
+        assert np.abs(free - compiled).max() > 1e-6
     none_found = np.full_like(candidates, np.nan)
-    _, ok = gauss_newton_steps(points, T, uv0, normal, none_found, expected, *args, 12, 1e-9, 1e-9)
+    _, ok = gauss_newton_steps(points, T, uv0, normal, none_found, expected, *args, 12, 1e-9, 1e-9, invert(prior),
+                               information)
     assert not ok
