@@ -71,23 +71,53 @@ def test_a_support_face_that_faces_the_cameras_is_named_and_the_hidden_one_propo
     assert "no face of the truth faces away" in support_face_problem(faces[5:], 0, poses)
 
 
-def test_eval_warns_of_a_support_face_that_faces_the_cameras(tmp_path, caplog):
+def _box_truth(path, faces, poses) -> str:
+    """A truth sidecar of the box of ``_box_faces`` with ``poses`` (K, 4, 4) at 0 .. K-1 ns."""
     import json
 
     from accumcli.geometry import quat_from_transform
+
+    path.write_text(json.dumps({
+        "format": "accum.truth/1", "object_frame": "object", "camera_frame": "camera_left",
+        "edges": [{"a": [0, 0, 0.1], "b": [0.1, 0, 0.1]}],
+        "faces": [{"vertices": f.vertices.tolist(), "normal": f.normal.tolist()} for f in faces],
+        "poses": [{"timestamp_ns": k, "translation": t.tolist(), "rotation_xyzw": q.tolist()}
+                  for k, (t, q) in enumerate(map(quat_from_transform, poses))]}))
+    return str(path)
+
+
+def test_single_frames_are_judged_by_surface_in_each_frames_pose(tmp_path):
+    """Per frame, the segments (camera frame) are placed by the truth's pose at the frame's time: print
+    on the top face counts, the floor does not, the board's plane only with its support face; a frame
+    without a truth pose is not counted."""
+    from accumcli.model_io import read_truth
+    from accumcli.surface import frame_surface_scores
+
+    faces, poses = _box_faces(), _cameras_above()
+    truth = read_truth(_box_truth(tmp_path / "box.truth.json", faces, poses))
+    body = _segments([[0.05, 0.05, 0.102], [0.05, 0.3, -0.2], [0.25, 0.05, 0.0]],   # print, floor, board
+                     [[1, 0, 0], [1, 0, 0], [0, 1, 0]])
+    frames = [(k, body.transformed(T, "camera_left")) for k, T in enumerate(poses)]
+    frames.append((10**9, body.transformed(poses[0], "camera_left")))    # no truth pose at 1 s
+    plain = frame_surface_scores(frames, truth, faces)
+    assert plain["surface_segments_per_frame"] == 1.0 and abs(plain["surface_precision_frames"] - 1 / 3) < 1e-12
+    board = frame_surface_scores(frames, truth, faces, support_face=4)
+    assert board["surface_segments_per_frame"] == 2.0 and abs(board["surface_precision_frames"] - 2 / 3) < 1e-12
+    # segments 20 mm deeper than the truth's pose put the print off the top face
+    far = poses[1].copy()
+    far[2, 3] += 0.02
+    shifted = frame_surface_scores([(1, body.transformed(far, "camera_left"))], truth, faces)
+    assert shifted["surface_segments_per_frame"] == 0.0
+
+
+def test_eval_warns_of_a_support_face_that_faces_the_cameras(tmp_path, caplog):
     from accumcli.model_io import write_model
     from accumcli.runs import evaluate_file
 
     faces, poses = _box_faces(), _cameras_above()
     model = tmp_path / "model.json"
     write_model(model, _segments([[0.05, 0.05, 0.1]], [[1, 0, 0]]))
-    truth = tmp_path / "box.truth.json"
-    truth.write_text(json.dumps({
-        "format": "accum.truth/1", "object_frame": "object", "camera_frame": "camera_left",
-        "edges": [{"a": [0, 0, 0.1], "b": [0.1, 0, 0.1]}],
-        "faces": [{"vertices": f.vertices.tolist(), "normal": f.normal.tolist()} for f in faces],
-        "poses": [{"timestamp_ns": k, "translation": t.tolist(), "rotation_xyzw": q.tolist()}
-                  for k, (t, q) in enumerate(map(quat_from_transform, poses))]}))
+    truth = _box_truth(tmp_path / "box.truth.json", faces, poses)
     with caplog.at_level("WARNING", logger="accumcli"):
         figures = evaluate_file(str(model), str(truth), support_face=5)
     assert figures["surface_precision"] == 1.0

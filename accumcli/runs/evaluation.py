@@ -14,7 +14,7 @@ from ..funnel import funnel
 from ..model_io import (check_kind, load_model_doc, pose_of_fields, read_frames, read_poses, read_truth,
                         segments_from_dict)
 from ..outputs import OutputSet
-from ..surface import faces_of, hidden_face, support_face_problem, surface_scores
+from ..surface import faces_of, frame_surface_scores, hidden_face, support_face_problem, surface_scores
 from .base import FrameRange, frame_range
 from .checks import check_same_time, check_truth_matches, check_truth_poses, check_truth_times
 
@@ -29,7 +29,8 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
     figures and the funnel, ``accumcli.funnel``) or a poses file (pose errors, tracked fraction).
     ``frames`` selects lines of a frames or poses file by position. A truth of another object frame,
     or one with no pose at the file's timestamps, is refused. A truth with ``faces`` also gives a
-    model's precision judged by surface (``accumcli.surface``; ``support_face``: the face it stands on).
+    model's precision judged by surface, and a frames file's segments per frame on the body
+    (``accumcli.surface``; ``support_face``: the face it stands on).
     ``plot``: a PNG of a frames file's figures frame by frame (``plots``)."""
     frames = frame_range(frames)
     if not isinstance(path, (str, os.PathLike)) or not isinstance(truth_path, (str, os.PathLike)):
@@ -52,21 +53,9 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
         if figures.get("accepted") and figures.get("precision") == 0:
             log.warning("%s: none of its %d accepted segments lies on an edge of %s: is it the truth of this "
                         "recording?", path, figures["accepted"], truth_path)
-        faces = faces_of(truth.meta)
+        faces = _faces(truth, truth_path, support_face)
         if faces:
-            if support_face is not None and not 0 <= support_face < len(faces):
-                raise InputError(f"{truth_path}: no face {support_face} (the truth has {len(faces)} faces)")
-            problem = None if support_face is None else support_face_problem(faces, support_face, truth.poses)
-            if problem:
-                log.warning("%s: %s", truth_path, problem)
             figures.update(surface_scores(model, faces, tol, support_face))
-            hidden = hidden_face(faces, truth.poses) if support_face is None else None
-            if hidden is not None:
-                log.warning("%s: surface figures count the object's faces only; if it stands on a board that "
-                            "moves with it, give --support-face %d (the face turned away from the cameras "
-                            "the most) to count the board's plane too", truth_path, hidden)
-        elif support_face is not None:
-            raise InputError(f"{truth_path}: the truth has no faces, so no support face {support_face}")
         return figures
     if kind == "poses":
         track = read_poses(path)
@@ -92,6 +81,9 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
         index_of = {t: row["frame_index"] for t, _, row in rows if isinstance(row.get("frame_index"), int)}
         for r in per_frame:   # the recording's frame numbers where the file has them, not the lines'
             r["frame_index"] = index_of.get(r["timestamp_ns"], r["frame_index"])
+        faces = _faces(truth, truth_path, support_face)
+        if faces:
+            figures.update(frame_surface_scores([(t, s) for t, s, _ in rows], truth, faces, tol, support_face))
         _warn_unjudged(figures, path, truth_path)
         if plot:
             from ..plots import plot_frames
@@ -100,6 +92,29 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
                 plot_frames(files.open(plot, "wb"), per_frame, f"accum eval {Path(path).name}: single frames")
         return figures
     raise InputError(f"{path}: expected a model, frames or poses file of accum to evaluate, got a {kind} file")
+
+
+def _faces(truth, truth_path, support_face: int | None) -> list:
+    """The truth's faces for figures by surface (``accumcli.surface``), ``support_face`` checked
+    (``InputError`` if the truth has no such face, or no faces at all; a warning if the truth's poses
+    show that face to the cameras, or if no support face is given where one face is hidden in every
+    frame)."""
+    faces = faces_of(truth.meta)
+    if not faces:
+        if support_face is not None:
+            raise InputError(f"{truth_path}: the truth has no faces, so no support face {support_face}")
+        return faces
+    if support_face is not None and not 0 <= support_face < len(faces):
+        raise InputError(f"{truth_path}: no face {support_face} (the truth has {len(faces)} faces)")
+    problem = None if support_face is None else support_face_problem(faces, support_face, truth.poses)
+    if problem:
+        log.warning("%s: %s", truth_path, problem)
+    hidden = hidden_face(faces, truth.poses) if support_face is None else None
+    if hidden is not None:
+        log.warning("%s: surface figures count the object's faces only; if it stands on a board that "
+                    "moves with it, give --support-face %d (the face turned away from the cameras "
+                    "the most) to count the board's plane too", truth_path, hidden)
+    return faces
 
 
 def _recorded_pose(doc: dict) -> np.ndarray | None:
