@@ -58,6 +58,18 @@ motion`` 8 of 12 within 0.02 against 9 (teabox with ``--motion tracked``: 0.608 
 0.611 / 0.704). Without either gate (the paper's 7 degrees, widened by sigmas at most to it):
 0.984 / 0.563 with the one-aspect rule. Counting the gate's width in the widening (a solid angle)
 lowered the completeness median 0.607 -> 0.533 (two-part test, without the one-aspect rule).
+Measured and not kept (accumulation alone on the suite's recordings, 4 runs a row, 2026-12-07,
+against docs/suite.md's precision median 0.963 with 3 rows under 0.95, completeness mean 0.691,
+worst 0.359): the ceiling ``max_angle_scale`` 4 instead of 2, so that pieces tilted in depth by 15
+to 28 degrees confirm the segment of their edge: completeness mean 0.710, worst 0.388, but 7 rows
+under 0.95 (sim_104 0.973 -> 0.918, dev_cube_small 0.908 -> 0.860); tracing sim_104's new wrong
+segments (13 to 29 degrees off, claiming 1 to 4) found observations whose view plane missed the
+true edge by 2 to 7 degrees (single-frame planes of pieces unsure in depth miss by over 3 claimed
+sigmas ten times as often as a Gaussian's). With it, neither that ceiling only for model segments
+sure to 3 degrees (completeness mean 0.694), nor such pieces' planes taken at twice their sigma
+(0.699, 8 rows under 0.95), nor accepting only directions whose planes agree (least over middle
+eigenvalue of ``dir_info`` at most 0.01: 0.690, 4 rows) kept the gain without the loss; position
+gates widened by each line's direction sigma times the offset along it changed nothing (0.689).
 """
 
 from __future__ import annotations
