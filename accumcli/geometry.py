@@ -2,10 +2,10 @@
 
 ``T_a_b`` maps points in frame b into frame a (see the package docstring).
 Rotation conversions use scipy's ``Rotation`` (quaternions ``xyzw``), except the exponential and
-angle of one rotation on the tracker's hot path (``rotation_about_point``: OpenCV's ``Rodrigues``;
+angle of one rotation on the tracker's hot path (``rotation_about_point`` and ``extrapolate``: OpenCV's ``Rodrigues``;
 ``rotation_angle_deg``: atan2 of the skew part's norm and trace - 1, precise near 0 and 180 degrees;
-``orthonormalized``: one SVD): 8x faster than ``Rotation`` for a single matrix, whose per-call overhead
-was a tenth of the tracking time.
+``orthonormalized``: one compiled SVD): 6x faster than ``Rotation`` for a single matrix, whose per-call
+overhead was a tenth of the tracking time.
 """
 
 from __future__ import annotations
@@ -105,8 +105,8 @@ def extrapolate(T0: np.ndarray, T1: np.ndarray, s: float) -> np.ndarray:
     """Pose at fraction ``s`` of the way from T0 to T1 at constant velocity, ``s`` any real (beyond 1:
     a prediction): the rotation ``exp(s log(R1 R0^T)) R0`` and the origin moving on the line through
     both translations (an object turning about itself, not about the camera)."""
-    step = Rotation.from_matrix(T1[:3, :3] @ T0[:3, :3].T).as_rotvec()
-    R = Rotation.from_rotvec(s * step).as_matrix() @ T0[:3, :3]
+    step = cv2.Rodrigues(T1[:3, :3] @ T0[:3, :3].T)[0]
+    R = cv2.Rodrigues(s * step)[0] @ T0[:3, :3]
     return make_transform(R, T0[:3, 3] + s * (T1[:3, 3] - T0[:3, 3]))
 
 
@@ -128,12 +128,11 @@ def rotation_angle_deg(R: np.ndarray) -> float:
 
 
 def orthonormalized(T: np.ndarray) -> np.ndarray:
-    """``T`` (4, 4) with its rotation projected onto the nearest rotation (SVD): products of many
-    small increments drift from orthonormal."""
-    U, _, Vt = np.linalg.svd(T[:3, :3])
-    if np.linalg.det(U @ Vt) < 0:
-        U[:, -1] = -U[:, -1]
-    return make_transform(U @ Vt, T[:3, 3])
+    """``T`` (4, 4) with its rotation projected onto the nearest rotation (SVD, compiled:
+    ``pose_kernel.nearest_rotation``): products of many small increments drift from orthonormal."""
+    from .pose_kernel import nearest_rotation
+
+    return make_transform(nearest_rotation(np.ascontiguousarray(T[:3, :3], np.float64)), T[:3, 3])
 
 
 def pose_error(T_est: np.ndarray, T_true: np.ndarray) -> tuple[float, float]:

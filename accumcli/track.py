@@ -141,8 +141,8 @@ from scipy.spatial import cKDTree
 from .geometry import (check_points, check_transform, extrapolate, invert, make_transform, orthonormalized, pose_error,
                        quat_from_transform, rotate_vectors, rotation_about_point, transform_points)
 from .edge_search import edge_candidates
-from .pose_kernel import (gauss_newton_steps, in_view, nearest_residuals, normal_equations, projected_normals,
-                          sample_points, verification_sums)
+from .pose_kernel import (condition_number, gauss_newton_steps, in_view, nearest_residuals, normal_equations,
+                          projected_normals, sample_points, verification_sums)
 from .lines2d import Gradients, LineParams, frame_gradients
 from .recording import StereoFrame, StereoIntrinsics
 from .segments import Segments
@@ -590,7 +590,7 @@ def _verify(T: np.ndarray, points_obj: np.ndarray, measurements, intr: StereoInt
     if sw > 6:
         sigma2 = float(swr2 / (sw - 6))
         information = H / max(sigma2, 1e-12)
-        if np.linalg.cond(H) < 1e12:
+        if condition_number(H) < 1e12:
             H_inv = np.linalg.inv(H)
             variance = np.maximum(np.diag(H_inv) * sigma2, _sandwich(H_inv, per_segment))
             std = np.sqrt(np.maximum(variance, 0.0)) * params.std_scale
