@@ -62,7 +62,9 @@ Measured and not kept (accumulation alone on the suite's recordings, 4 runs a ro
 against docs/suite.md's precision median 0.963 with 3 rows under 0.95, completeness mean 0.691,
 worst 0.359): the ceiling ``max_angle_scale`` 4 instead of 2, so that pieces tilted in depth by 15
 to 28 degrees confirm the segment of their edge: completeness mean 0.710, worst 0.388, but 7 rows
-under 0.95 (sim_104 0.973 -> 0.918, dev_cube_small 0.908 -> 0.860); tracing sim_104's new wrong
+under 0.95 (sim_104 0.973 -> 0.918, dev_cube_small 0.908 -> 0.860); 3 instead of 2: completeness
+median 0.673 -> 0.683, mean 0.703, worst 0.389, but precision median 0.957, 4 rows under 0.95
+(sim_111 0.942) and the worst simulated or devset row lower (dev_cube_small 0.874); tracing sim_104's new wrong
 segments (13 to 29 degrees off, claiming 1 to 4) found observations whose view plane missed the
 true edge by 2 to 7 degrees (single-frame planes of pieces unsure in depth miss by over 3 claimed
 sigmas ten times as often as a Gaussian's). With it, neither that ceiling only for model segments
