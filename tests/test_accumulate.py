@@ -422,6 +422,31 @@ def test_views_within_the_aspect_span_count_as_one_aspect():
     assert direction_known(segments, rules(None, 15.0)).all()
 
 
+def test_plane_agreement_holds_back_a_direction_whose_planes_do_not_meet_on_one_line():
+    """Two segments along x, each set by three view planes (unit weights): the first's planes all
+    contain x; the second's third plane misses x by 9 degrees, so its planes meet on no one line (the
+    least eigenvalue of their information is 0.0123 of the middle one). With ``plane_agreement``
+    0.006 only the first is known; with 0.02, or without the rule, both."""
+    def planes(*normals):
+        n = np.array(normals, float)
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        return (n[:, :, None] * n[:, None, :]).sum(axis=0)
+
+    tilt = np.radians(9.0)
+    dir_info = np.stack([planes([0, 0, 1], [0, 1, 0], [0, 1, 1]),
+                         planes([0, 0, 1], [0, 1, 0], [np.sin(tilt), np.cos(tilt) / np.sqrt(2), np.cos(tilt) / np.sqrt(2)])])
+    views = np.zeros((2, 6, 3), np.float32)
+    views[:, 0], views[:, 1] = [0, 0, 1], [np.sin(np.radians(20.0)), 0, np.cos(np.radians(20.0))]
+    segments = Segments("gripper", np.zeros((2, 3)), np.tile([1.0, 0, 0], (2, 1)), np.full(2, 0.02), np.ones(2),
+                        np.full(2, 4), {"views": views, "inv_var_direction": np.full(2, np.radians(1.0) ** -2),
+                                        "dir_info": dir_info})
+    values = np.linalg.eigvalsh(dir_info)
+    assert values[0, 0] < 1e-12 and 0.012 < values[1, 0] / values[1, 1] < 0.0125
+    assert direction_known(segments, LineModelParams(plane_agreement=0.006)).tolist() == [True, False]
+    assert direction_known(segments, LineModelParams(plane_agreement=0.02)).all()
+    assert direction_known(segments, LineModelParams()).all()
+
+
 def test_duplicates_merge_in_disjoint_pairs_and_keep_every_observation():
     """Three copies of one segment (pairs 0-1, 1-2, 0-2 all the same): merged in rounds of disjoint
     pairs, one survives with every observation and every view's information (with one_to_one, whose

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -822,3 +824,12 @@ def test_frames_without_a_pose_at_their_times_are_one_reason_with_a_word_on_the_
     near = {"a -> b: time 10.000 s is outside the transform samples [10.500, 20.000] s": 1}
     assert "clocks" not in str(nothing_done("bag", "nothing", near))
 
+
+
+def test_plane_agreement_needs_view_planes(tmp_path):
+    """--plane-agreement tests the planes of --view-planes: with --average-directions it is refused in
+    one line before any work (no model written)."""
+    sample = Path(__file__).resolve().parents[1] / "sample_data" / "sim_box.mcap"
+    result = run("accumulate", sample, "-o", tmp_path / "m.json", "--plane-agreement", "0.006", "--average-directions")
+    assert result.exit_code != 0 and "--average-directions has none" in result.output
+    assert not (tmp_path / "m.json").exists()
