@@ -70,7 +70,8 @@ true edge by 2 to 7 degrees (single-frame planes of pieces unsure in depth miss 
 sigmas ten times as often as a Gaussian's). With it, neither that ceiling only for model segments
 sure to 3 degrees (completeness mean 0.694), nor such pieces' planes taken at twice their sigma
 (0.699, 8 rows under 0.95), nor accepting only directions whose planes agree (least over middle
-eigenvalue of ``dir_info`` at most 0.01: 0.690, 4 rows) kept the gain without the loss; position
+eigenvalue of ``dir_info`` at most 0.01: 0.690, 4 rows; that rule alone is ``accum accumulate
+--plane-agreement``, ``line_model.direction_known``) kept the gain without the loss; position
 gates widened by each line's direction sigma times the offset along it changed nothing (0.689).
 """
 
