@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .evaluate import Tolerances
+from .geometry import invert
 from .segments import Segments
 
 
@@ -133,8 +134,6 @@ def frame_surface_scores(frames, truth, faces: list[Face], tol: Tolerances = Tol
     and ``surface_precision_frames``, their share of all the frames' segments. Why: on an object with
     print or texture, the segments a stereo pair gives on the body, not only on its edges, are what a
     tracker or a model can use (issue 9 asks 300 a pair on the real teabox)."""
-    from .geometry import invert
-
     on, total, counted = 0, 0, 0
     for t_ns, segments in frames:
         T = truth.pose_at(int(t_ns))
