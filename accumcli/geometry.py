@@ -130,7 +130,7 @@ def rotation_angle_deg(R: np.ndarray) -> float:
 def orthonormalized(T: np.ndarray) -> np.ndarray:
     """``T`` (4, 4) with its rotation projected onto the nearest rotation (SVD, compiled:
     ``pose_kernel.nearest_rotation``): products of many small increments drift from orthonormal."""
-    from .pose_kernel import nearest_rotation
+    from .pose_kernel import nearest_rotation   # here: importing this module must not load numba
 
     return make_transform(nearest_rotation(np.ascontiguousarray(T[:3, :3], np.float64)), T[:3, 3])
 

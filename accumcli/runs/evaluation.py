@@ -75,15 +75,15 @@ def evaluate_file(path, truth_path, tol: Tolerances = Tolerances(), frames: Fram
         recorded = [(t, row["T_camera_object"]) for t, _, row in rows if isinstance(row.get("T_camera_object"), dict)]
         check_truth_poses(truth, [t for t, _ in recorded], [_recorded_pose(p) for _, p in recorded], path, truth_path,
                           TIME_TOLERANCE_NS)
-        per_frame = []
-        figures = {**evaluate_frames([(t, s) for t, s, _ in rows], truth, tol, per_frame),
+        per_frame, segments = [], [(t, s) for t, s, _ in rows]
+        figures = {**evaluate_frames(segments, truth, tol, per_frame),
                    **funnel(rows, truth, tol)}
         index_of = {t: row["frame_index"] for t, _, row in rows if isinstance(row.get("frame_index"), int)}
         for r in per_frame:   # the recording's frame numbers where the file has them, not the lines'
             r["frame_index"] = index_of.get(r["timestamp_ns"], r["frame_index"])
         faces = _faces(truth, truth_path, support_face)
         if faces:
-            figures.update(frame_surface_scores([(t, s) for t, s, _ in rows], truth, faces, tol, support_face))
+            figures.update(frame_surface_scores(segments, truth, faces, tol, support_face))
         _warn_unjudged(figures, path, truth_path)
         if plot:
             from ..plots import plot_frames
