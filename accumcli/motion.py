@@ -248,7 +248,12 @@ def on_model(model: Segments, frame, T_fused: np.ndarray, track: TrackParams, gr
     frame the aspects it was built from, and ``fuse`` weighs and gates each refinement anyway. On
     ``make motion`` the tracker's limit left seed 307's frames 0-8 and 19-21 unrefined (coverage 0.29
     to 0.41); with 0.3 its shortfall is 0.066 (0.093), 311's 0.011 (0.016), every other seed's and
-    the real teabox's ``--motion tracked`` model the same (0.2: 307 0.069)."""
+    the real teabox's ``--motion tracked`` model the same (0.2: 307 0.069). Measured and not kept
+    (2026-12-07, 12 seeds, 2 runs each): each frame refined on the model of the other frames only (two
+    or three folds of alternate frames, so that a frame's own pose error is not in the model it is
+    refined on): the repaired poses as far off as before (seed 307 0.84 degrees both, 301 0.68 ->
+    0.72), 8 of 12 scenes within 0.02 with three folds against 10 of 12 (304 0.017 -> 0.048): what
+    limits these poses is not the model agreeing with its own frame."""
     track = replace(track, min_coverage=params.model_min_coverage)
     found = frame_to_frame(model, frame, T_fused, track, gradients, params)
     if found is None:
