@@ -443,7 +443,10 @@ def direction_known(entities: Segments, rules: LineModelParams | None) -> np.nda
     0.95 or more (sim_105 0.930 -> 0.961, dev_cube_small 0.908 -> 0.951; before, three rows under),
     but completeness median 0.673 -> 0.651, mean 0.691 -> 0.669, worst 0.359 -> 0.328: a choice for
     who needs every accepted segment right, so not the default. With the covariance gate's ceiling at
-    3 s_o (``metric``) beside it: completeness mean 0.670, dev_cube_small 0.948."""
+    3 s_o (``metric``) beside it: completeness mean 0.670, dev_cube_small 0.948. Milder ratios trade
+    along the same line (same measure): 0.009 precision median 0.970, completeness median 0.670, mean
+    0.680, worst 0.347, one row under 0.95 besides the teabox (dev_cube_small 0.937); 0.012 0.969 /
+    0.670 / 0.685 / 0.350, two (sim_105 0.949, dev_cube_small 0.925)."""
     if rules is None or rules.max_direction_sigma_deg is None:
         return np.ones(len(entities), bool)
     inverse_variance = entities.extra["inv_var_direction"]

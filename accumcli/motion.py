@@ -69,7 +69,10 @@ class MotionParams:
     halved the worst shortfall, 0.072 to 0.044, and 22.5 (0.1 %) let them through); ``span``: each frame is
     refined against the object segments of the ``span`` frames before it (a second link bridges a
     failed one, and a wrong one contradicts the others: on seeds 301-306 a span of 2 halved the median
-    shortfall from the exact poses' model, 3 did not help further); ``residual_chi2``: after the
+    shortfall from the exact poses' model, 3 did not help further; on seeds 301-312, 2 runs each,
+    2026-12-07, 4 against 2: the same median shortfall (0.012), repaired poses 0.54 degrees / 0.88 mm
+    against 0.56 / 0.96, worst seed 0.065 against 0.087, but 301 and 310 0.019 -> 0.026 and 0.005 ->
+    0.019: within the draws' scatter); ``residual_chi2``: after the
     fusion, the link furthest from the fused poses (chi-square of its information) is dropped while
     above this (6 degrees of freedom, 1 %), and the rest fused again (None: never);
     ``information_scale``: a link's image information is divided by this (its residuals are
