@@ -151,9 +151,12 @@ def score_segments(segments: Segments, edges: EdgeSamples, tol: Tolerances = Tol
 def evaluate_model(model: Segments, truth: Truth, tol: Tolerances = Tolerances()) -> dict:
     """Scores of a model's accepted segments (confidence >= 0.5) against the truth, and the
     completeness of all its segments whatever their confidence (``completeness_any_confidence``:
-    what accumulation found but has not, or not yet, confirmed). Where the truth's edges name two or
-    more parts (the object, the gripper that holds it), ``completeness_<part>`` of each: the gripper's
-    many short edges were most of the counted length on the scoreboard, and a model can lose it alone."""
+    what accumulation found but has not, or not yet, confirmed) and, where the model marks them
+    (``direction_held``), of the accepted ones and those confirmed but held back for their direction
+    (``completeness_with_held``: how much of that gap is the direction's, not the confirmation's).
+    Where the truth's edges name two or more parts (the object, the gripper that holds it),
+    ``completeness_<part>`` of each: the gripper's many short edges were most of the counted length on
+    the scoreboard, and a model can lose it alone."""
     edges = EdgeSamples.of(truth, tol)
     distance, correct, correct_for = classify(model, edges, tol)   # once for all segments, accepted or not
     a = model.accepted
@@ -161,6 +164,10 @@ def evaluate_model(model: Segments, truth: Truth, tol: Tolerances = Tolerances()
     anywhere = _completeness(covered_samples(model, correct_for, edges, tol), edges)
     figures = {"segments": len(model), "accepted": scores.pop("segments"), **scores,
                "completeness_any_confidence": anywhere}
+    if "direction_held" in model.extra:
+        sure_or_held = a | (model.extra["direction_held"] > 0.5)
+        figures["completeness_with_held"] = _completeness(
+            covered_samples(model.select(sure_or_held), correct_for[sure_or_held], edges, tol), edges)
     parts = np.asarray(truth.parts if len(truth.parts) == len(truth.a) else [""] * len(truth.a), dtype=object)
     named = sorted({p for p in parts if p})
     if len(named) >= 2:

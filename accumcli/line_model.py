@@ -472,7 +472,9 @@ def to_model(entities: Segments, confidence: np.ndarray, observations: np.ndarra
     ``rules`` (the run's ``LineModelParams``; None: none) decide which directions are sure enough
     (``direction_known``). A segment whose direction sigma exceeds ``max_direction_sigma_deg`` is
     not accepted, whatever its confidence (written at most ``UNSURE_CONFIDENCE``): its existence is
-    confirmed, its line is not. Such segments are seen from one aspect by pieces alone on their stretch, whose direction
+    confirmed, its line is not. ``direction_held`` (N,) bool marks the confident ones held back so,
+    for ``evaluate_model`` to tell this loss from segments never confirmed: on the suite's models it
+    is most of what the model found and did not accept. Such segments are seen from one aspect by pieces alone on their stretch, whose direction
     stereo leaves unsure (``stereo``: 1 degree, or a short line's fit, over the sine of their planes' angle); more aspects
     or a fitted stretch pin it. 5 degrees keeps the direction's two sigmas within the 10 degrees
     by which a segment counts as correct. ``make suite`` against none: precision median 0.944 ->
@@ -509,12 +511,13 @@ def to_model(entities: Segments, confidence: np.ndarray, observations: np.ndarra
     cones that tracking relies on (false tracked frames on the tracking scoreboard)."""
     extra = entities.extra
     known = direction_known(entities, rules)
+    held = ~known & (np.asarray(confidence) >= 0.5)
     confidence = np.where(known, confidence, np.minimum(confidence, UNSURE_CONFIDENCE))
     views = extra["views"]
     mean_view = _unit(views.sum(axis=1))
     cosines = np.where(views.any(axis=2), np.einsum("nkj,nj->nk", views, mean_view), 1.0)
     spread = np.degrees(np.arccos(np.clip(cosines.min(axis=1, initial=1.0), -1, 1)))
-    columns = {"view_direction": mean_view, "view_spread_deg": spread,
+    columns = {"direction_held": held, "view_direction": mean_view, "view_spread_deg": spread,
                "sigma_direction_rad": 1.0 / np.sqrt(extra["inv_var_direction"])}
     if uncertainty:
         covariance = np.linalg.inv(extra["info"]) if len(entities) else np.zeros((0, 3, 3))

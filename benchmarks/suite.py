@@ -4,10 +4,12 @@ Per recording: the single-frame funnel (``accum eval`` of ``accum extract --with
 the seen edge length detected in 2D, not critical, matched, correct in 3D), the single-frame
 near-object precision, the share of the counted edge length that single frames got right in at least
 two frames (``ok twice``: about what accumulation can reach from them), the share that any model
-segment covers whatever its confidence (``in model``), the accumulated model's precision /
+segment covers whatever its confidence (``in model``), what the accepted segments and those confirmed
+but held back for their direction cover (``w/ held``), the accumulated model's precision /
 completeness / background, and the accumulation's stereo pairs per second; then the median and the
 worst row of every column. ``ok twice`` against 1 is what extraction loses, ``complete`` against
-``ok twice`` what accumulation loses (``in model`` against ``complete``: found, never confirmed);
+``ok twice`` what accumulation loses (``in model`` against ``complete``: found, not accepted; of that,
+``w/ held`` against ``complete`` confirmed but not sure of its direction, the rest never confirmed);
 ``object`` and ``gripper`` split ``complete`` by the truth edges' part, where the truth names them.
 ``still``: the share of the accepted length that the recording's images show staying still in the
 camera's view instead of moving with the object (``accum check``, which needs no truth: on the real
@@ -54,7 +56,8 @@ OK_TWICE = ("ok twice", "funnel_correct_twice", "high")
 COLUMNS = [("2d", "funnel_detected_2d", "high"), ("not crit", "funnel_not_critical", "high"),
            ("matched", "funnel_matched", "high"), ("3d ok", "funnel_correct_3d", "high"),
            ("near prec", "accuracy_near_object", "high"), OK_TWICE,
-           ("in model", "completeness_any_confidence", "high"), ("precision", "precision", "high"),
+           ("in model", "completeness_any_confidence", "high"), ("w/ held", "completeness_with_held", "high"),
+           ("precision", "precision", "high"),
            ("complete", "completeness", "high"), ("object", "completeness_object", "high"),
            ("gripper", "completeness_gripper", "high"), ("backgr", "background", "low"),
            ("still", "still_share", "low"),

@@ -83,6 +83,23 @@ def test_completeness_any_confidence_counts_what_is_not_accepted():
     assert scores["completeness_any_confidence"] >= 0.98
 
 
+def test_completeness_with_held_counts_the_confident_segments_held_back_for_their_direction():
+    """Three quarters of an edge: the upper quarter accepted, the next held back for its direction
+    (confident, written at 0.49), the third found once and never confirmed: with held adds the
+    second quarter only; a model without the column gives no such figure."""
+    truth = _truth([0, -0.05, 1], [0, 0.05, 1])
+    parts = [_vertical_segment(-0.05, -0.025), _vertical_segment(-0.025, 0.0), _vertical_segment(0.0, 0.025)]
+    model = Segments("gripper", np.concatenate([p.centers for p in parts]), np.concatenate([p.directions for p in parts]),
+                     np.concatenate([p.lengths for p in parts]), np.array([0.9, 0.49, 0.3]), np.array([5, 6, 1]),
+                     {"direction_held": np.array([False, True, False])})
+    scores = evaluate_model(model, truth)
+    assert 0.2 <= scores["completeness"] <= 0.3
+    assert 0.45 <= scores["completeness_with_held"] <= 0.55
+    assert 0.7 <= scores["completeness_any_confidence"] <= 0.8
+    model.extra.clear()
+    assert "completeness_with_held" not in evaluate_model(model, truth)
+
+
 def test_completeness_by_part_where_the_truth_names_parts():
     """Two edges, the object's (x = 0) and the gripper's (x = 0.05 m), the model on the first only: the object's
     part complete, the gripper's not; a truth without parts gives no such figures."""
