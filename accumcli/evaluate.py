@@ -151,9 +151,10 @@ def score_segments(segments: Segments, edges: EdgeSamples, tol: Tolerances = Tol
 def evaluate_model(model: Segments, truth: Truth, tol: Tolerances = Tolerances()) -> dict:
     """Scores of a model's accepted segments (confidence >= 0.5) against the truth, and the
     completeness of all its segments whatever their confidence (``completeness_any_confidence``:
-    what accumulation found but has not, or not yet, confirmed) and, where the model marks them
+    what accumulation found but has not accepted) and, where the model marks them
     (``direction_held``), of the accepted ones and those confirmed but held back for their direction
-    (``completeness_with_held``: how much of that gap is the direction's, not the confirmation's).
+    (``completeness_with_held``: how much of that gap is the direction's; the rest is not, or no
+    longer, confirmed).
     Where the truth's edges name two or more parts (the object, the gripper that holds it),
     ``completeness_<part>`` of each: the gripper's many short edges were most of the counted length on
     the scoreboard, and a model can lose it alone."""

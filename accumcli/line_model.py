@@ -465,16 +465,16 @@ def direction_known(entities: Segments, rules: LineModelParams | None) -> np.nda
 def to_model(entities: Segments, confidence: np.ndarray, observations: np.ndarray,
              uncertainty: bool = True, rules: LineModelParams | None = None) -> Segments:
     """The model as written to files: segments with confidence and observation count, and
-    per segment its mean viewing direction, cone half-angle (degrees), direction sigma (rad) and
-    (unless ``uncertainty`` is False: it inverts every segment's information, which tracking during
+    per segment its mean viewing direction, cone half-angle (degrees), direction sigma (rad),
+    ``direction_held`` (bool: confident, confidence >= 0.5, but held back by the rules below, so
+    that ``evaluate_model`` can tell this loss from segments not confirmed) and (unless
+    ``uncertainty`` is False: it inverts every segment's information, which tracking during
     accumulation does not need) the standard deviation of its position across its direction (m).
 
     ``rules`` (the run's ``LineModelParams``; None: none) decide which directions are sure enough
     (``direction_known``). A segment whose direction sigma exceeds ``max_direction_sigma_deg`` is
     not accepted, whatever its confidence (written at most ``UNSURE_CONFIDENCE``): its existence is
-    confirmed, its line is not. ``direction_held`` (N,) bool marks the confident ones held back so,
-    for ``evaluate_model`` to tell this loss from segments never confirmed: on the suite's models it
-    is most of what the model found and did not accept. Such segments are seen from one aspect by pieces alone on their stretch, whose direction
+    confirmed, its line is not. Such segments are seen from one aspect by pieces alone on their stretch, whose direction
     stereo leaves unsure (``stereo``: 1 degree, or a short line's fit, over the sine of their planes' angle); more aspects
     or a fitted stretch pin it. 5 degrees keeps the direction's two sigmas within the 10 degrees
     by which a segment counts as correct. ``make suite`` against none: precision median 0.944 ->

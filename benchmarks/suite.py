@@ -9,7 +9,8 @@ but held back for their direction cover (``w/ held``), the accumulated model's p
 completeness / background, and the accumulation's stereo pairs per second; then the median and the
 worst row of every column. ``ok twice`` against 1 is what extraction loses, ``complete`` against
 ``ok twice`` what accumulation loses (``in model`` against ``complete``: found, not accepted; of that,
-``w/ held`` against ``complete`` confirmed but not sure of its direction, the rest never confirmed);
+``w/ held`` against ``complete`` confirmed but not sure of its direction, the rest not, or no longer,
+confirmed);
 ``object`` and ``gripper`` split ``complete`` by the truth edges' part, where the truth names them.
 ``still``: the share of the accepted length that the recording's images show staying still in the
 camera's view instead of moving with the object (``accum check``, which needs no truth: on the real

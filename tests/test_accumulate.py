@@ -369,6 +369,7 @@ def test_a_confirmed_segment_whose_direction_is_unsure_is_not_accepted_until_ano
     assert model.extra["direction_held"][0]                      # confident, held back for its direction
     assert not to_model(one_aspect, np.array([0.3]), np.array([1]), rules=rules).extra["direction_held"][0]
     assert to_model(one_aspect, np.array([0.95]), np.array([4]), rules=None).accepted[0]
+    assert not to_model(one_aspect, np.array([0.95]), np.array([4]), rules=None).extra["direction_held"][0]
     two_aspects = kind.merge(one_aspect, observed[1][0], np.array([0]), np.array([0]),
                              FrameContext(observed[1][1], INTR))
     model = to_model(two_aspects, np.array([0.95]), np.array([5]), rules=rules)

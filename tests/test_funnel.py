@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 
 from accumcli.evaluate import EdgeSamples, evaluate_model
 from accumcli.funnel import LOSSES, detected_by, frame_funnel, funnel
-from accumcli.model_io import Truth
+from accumcli.model_io import Truth, dumps, segments_from_dict, segments_to_dict
 from accumcli.segments import Segments
 
 INTR = {"fx": 500.0, "fy": 500.0, "cx": 320.0, "cy": 240.0, "baseline": 0.1, "width": 640, "height": 480}
@@ -96,6 +98,8 @@ def test_completeness_with_held_counts_the_confident_segments_held_back_for_thei
     assert 0.2 <= scores["completeness"] <= 0.3
     assert 0.45 <= scores["completeness_with_held"] <= 0.55
     assert 0.7 <= scores["completeness_any_confidence"] <= 0.8
+    written = segments_from_dict(json.loads(dumps(segments_to_dict(model))), "model")   # true / false -> 1.0 / 0.0
+    assert evaluate_model(written, truth)["completeness_with_held"] == scores["completeness_with_held"]
     model.extra.clear()
     assert "completeness_with_held" not in evaluate_model(model, truth)
 
