@@ -135,17 +135,18 @@ def _completeness(covered: np.ndarray, edges: EdgeSamples) -> float:
     return float(covered[edges.counted].mean()) if edges.counted.any() else float("nan")
 
 
-def _scores(segments: Segments, distance, correct, correct_for, edges: EdgeSamples, tol: Tolerances) -> SegmentScores:
-    """``score_segments`` from the segments' ``classify`` result."""
+def _scores(segments: Segments, distance, correct, covered, edges: EdgeSamples, tol: Tolerances) -> SegmentScores:
+    """``score_segments`` from the segments' ``classify`` result and the samples they cover (``covered_samples``)."""
     n = max(len(segments), 1)
     return SegmentScores(len(segments), float(correct.sum() / n) if len(segments) else float("nan"),
-                         _completeness(covered_samples(segments, correct_for, edges, tol), edges),
+                         _completeness(covered, edges),
                          float((distance > tol.background_dist).sum() / n) if len(segments) else float("nan"))
 
 
 def score_segments(segments: Segments, edges: EdgeSamples, tol: Tolerances = Tolerances()) -> SegmentScores:
     """Precision, completeness and background of ``segments`` (object frame)."""
-    return _scores(segments, *classify(segments, edges, tol), edges, tol)
+    distance, correct, correct_for = classify(segments, edges, tol)
+    return _scores(segments, distance, correct, covered_samples(segments, correct_for, edges, tol), edges, tol)
 
 
 def evaluate_model(model: Segments, truth: Truth, tol: Tolerances = Tolerances()) -> dict:
@@ -161,18 +162,18 @@ def evaluate_model(model: Segments, truth: Truth, tol: Tolerances = Tolerances()
     edges = EdgeSamples.of(truth, tol)
     distance, correct, correct_for = classify(model, edges, tol)   # once for all segments, accepted or not
     a = model.accepted
-    scores = _scores(model.select(a), distance[a], correct[a], correct_for[a], edges, tol).as_dict()
+    covered = covered_samples(model.select(a), correct_for[a], edges, tol)   # once: the scores and the parts
+    scores = _scores(model.select(a), distance[a], correct[a], covered, edges, tol).as_dict()
     anywhere = _completeness(covered_samples(model, correct_for, edges, tol), edges)
     figures = {"segments": len(model), "accepted": scores.pop("segments"), **scores,
                "completeness_any_confidence": anywhere}
-    if "direction_held" in model.extra:
-        sure_or_held = a | (model.extra["direction_held"] > 0.5)
+    if "direction_held" in model.extra:   # what a set of segments covers is the union of what each covers
+        held = ~a & (model.extra["direction_held"] > 0.5)
         figures["completeness_with_held"] = _completeness(
-            covered_samples(model.select(sure_or_held), correct_for[sure_or_held], edges, tol), edges)
+            covered | covered_samples(model.select(held), correct_for[held], edges, tol), edges)
     parts = np.asarray(truth.parts if len(truth.parts) == len(truth.a) else [""] * len(truth.a), dtype=object)
     named = sorted({p for p in parts if p})
     if len(named) >= 2:
-        covered = covered_samples(model.select(a), correct_for[a], edges, tol)
         for part in named:
             counted = edges.counted & (parts[edges.edge] == part)
             figures[f"completeness_{part}"] = float(covered[counted].mean()) if counted.any() else float("nan")
