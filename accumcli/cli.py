@@ -381,13 +381,18 @@ def extract(recording, output, rrd, with_2d, workers, frames, extract_params, op
               help="Accept a segment only where the planes of the views that set its direction meet on one line: "
                    "their residual at most RATIO of what pins the direction (0.006 made every simulated and devset "
                    "row of make suite 0.95 precise or more, at 0.02 less completeness). Needs --view-planes.")
+@click.option("--merge-twins/--keep-twins", default=True, show_default=True,
+              help="Write the model with the twins of an edge merged: segments built from different aspects beside "
+                   "each other whose view planes together pin the edge (stereo tilted each; neither is sure of its "
+                   "direction alone; needs --view-planes); --keep-twins writes them as accumulated.")
 @box_option
 @frame_workers_option
 @frames_option
 @extraction_options
 @recording_options
 def accumulate(recording, outputs, ply_all, rrd, truth, history, plot, png, panel, motion, poses, position_threshold,
-               angle_threshold, view_planes, plane_agreement, box, workers, frames, extract_params, options):
+               angle_threshold, view_planes, plane_agreement, merge_twins, box, workers, frames, extract_params,
+               options):
     """Accumulate a model of the object over the recording, with the gripper's known motion.
 
     \b
@@ -407,7 +412,8 @@ def accumulate(recording, outputs, ply_all, rrd, truth, history, plot, png, pane
     if plane_agreement is not None and not view_planes:
         raise click.UsageError("--plane-agreement tests the planes of --view-planes; --average-directions has none")
     line_model = LineModelParams(thresholds=MetricThresholds(position_threshold / 1000.0, angle_threshold),
-                                 view_planes=view_planes, plane_agreement=plane_agreement)
+                                 view_planes=view_planes, plane_agreement=plane_agreement,
+                                 merge_twins=merge_twins)
     params = AccumulateParams(extract=extract_params, line_model=line_model, motion=motion, box=box)
     result = run_with_progress("accumulating", accumulate_recording, recording, outputs, params=params,
                                options=options, frames=frames, truth=truth, history=history, plot=plot, rrd=rrd,

@@ -13,8 +13,8 @@ from .accumulate import Accumulator, StepStats, UpdateRule
 from .errors import InputError
 from .extract import ExtractParams, FrameSegments, extract_frame
 from .geometry import inside_box, invert, mean_transform, pose_error, rotate_vectors, transform_points
-from .line_model import (FrameContext, LineModelParams, LineSegmentType, direction_known, planes_from_image,
-                         to_model)
+from .line_model import (FrameContext, LineModelParams, LineSegmentType, direction_known, merged_twins,
+                         planes_from_image, to_model)
 from .lines2d import Gradients, Segments2D, StageTimes
 from .recording import StereoFrame
 from .segments import Segments
@@ -174,9 +174,11 @@ class LineAccumulation:
         return gradients, extraction.left.select(extraction.left_index)
 
     def _written(self, uncertainty: bool = True) -> Segments:
-        """The core's segments as ``to_model`` writes them, with this run's acceptance rules."""
-        return to_model(self.core.entities, self.core.confidence, self.core.observations, uncertainty=uncertainty,
-                        rules=self.params.line_model)
+        """The core's segments as ``to_model`` writes them, with this run's acceptance rules (its twins
+        merged first, ``merged_twins``, unless ``LineModelParams.merge_twins`` is off)."""
+        rules = self.params.line_model
+        core = merged_twins(self.core, rules) if rules.merge_twins else self.core
+        return to_model(core.entities, core.confidence, core.observations, uncertainty=uncertainty, rules=rules)
 
     def _refined(self, frame: StereoFrame, T_recorded: np.ndarray,
                  extraction: FrameSegments) -> tuple[np.ndarray, PoseEstimate | None]:

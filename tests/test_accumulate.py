@@ -9,7 +9,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from accumcli.accumulate import Accumulator, UpdateRule, _sharing, disjoint_pairs, one_to_one
+from accumcli.accumulate import Accumulator, UpdateRule, _sharing, disjoint_pairs, logit, one_to_one
 from accumcli.geometry import invert, make_transform, transform_points
 from accumcli.line_model import (
     OBSERVATION_ONLY,
@@ -18,6 +18,7 @@ from accumcli.line_model import (
     LineModelParams,
     LineSegmentType,
     direction_known,
+    merged_twins,
     planes_from_image,
     sigmas,
     to_model,
@@ -518,3 +519,77 @@ def test_planes_of_unmatched_pieces_from_another_aspect_pin_a_direction_stereo_t
         assert int(model.extra["views"][0].any(axis=1).sum()) == frames   # the first plane's view waits
     assert off_y(model) < 1.5          # the planes cross in the edge; stereo (6 deg sigma) pulls a little
     assert direction_known(model, rules)[0]
+
+
+def _twin_core(kind: LineSegmentType, turns_deg, offsets_m, confidences, tilt_deg=12.0, sigma_deg=15.0) -> Accumulator:
+    """An accumulator of segments along y, one per camera turned ``turns_deg`` about y, each at
+    ``offsets_m`` along x and triangulated ``tilt_deg`` tilted towards its camera (within its view plane,
+    stereo's weak direction), claiming a direction sigma of ``sigma_deg``, at ``confidences``."""
+    core = Accumulator(kind, kind.empty("gripper"))
+    core.entities = kind.empty("gripper")
+    for turn, offset in zip(turns_deg, offsets_m):
+        T = make_transform(Rotation.from_rotvec([0, np.radians(turn), 0]).as_matrix(), [0.0, 0.0, 0.5])
+        camera = invert(T)[:3, 3]
+        toward = camera - camera[1] * np.array([0.0, 1.0, 0.0])
+        toward /= np.linalg.norm(toward)
+        segment = _one_segment(tuple(np.cos(np.radians(tilt_deg)) * np.array([0.0, 1.0, 0.0])
+                                     + np.sin(np.radians(tilt_deg)) * toward))
+        segment.centers = np.array([[offset, 0.0, 0.0]])
+        segment.extra["sigma_direction_rad"] = np.array([np.radians(sigma_deg)])
+        core.entities = kind.concatenate(core.entities, kind.observe(segment, FrameContext(T, INTR)))
+    n = len(turns_deg)
+    core.log_odds = np.array([logit(c) for c in confidences])
+    core.observations, core.views = np.full(n, 3, np.int64), np.full(n, 3, np.int64)
+    core.last_confirmed = np.zeros(n, np.int64)
+    return core
+
+
+def _angle_to_y_deg(segments: Segments) -> np.ndarray:
+    return np.degrees(np.arccos(np.abs(segments.directions[:, 1])))
+
+
+def test_twins_of_one_edge_from_two_aspects_are_merged_as_the_model_is_written():
+    """Two segments of one edge, 2 mm apart, each triangulated 12 degrees tilted towards its own camera
+    (40 degrees apart about the edge) and unsure of it (15 degrees): neither is accepted alone, and they
+    are too far apart in direction (8 degrees) and position for the paper's metric to call them one.
+    Their view planes together pin the edge: ``merged_twins`` makes them one segment within 2 degrees of
+    it, which is accepted at the more confident one's confidence; the running accumulator is untouched."""
+    params = LineModelParams()
+    kind = LineSegmentType(params)
+    core = _twin_core(kind, (0.0, 40.0), (0.0, 0.002), (0.6, 0.3))
+    assert (_angle_to_y_deg(core.entities) > 11.0).all()
+    alone = to_model(core.entities, core.confidence, core.observations, rules=params)
+    assert not alone.accepted.any() and alone.extra["direction_held"][0]
+    same, _ = kind.same(core.entities, np.array([0]), np.array([1]))
+    assert not same[0]
+    centers = core.entities.centers.copy()
+    merged = merged_twins(core, params)
+    assert len(merged) == 1 and len(core) == 2 and np.array_equal(core.entities.centers, centers)
+    assert merged.observations[0] == 6 and np.isclose(merged.confidence[0], 0.6)
+    model = to_model(merged.entities, merged.confidence, merged.observations, rules=params)
+    assert model.accepted[0] and _angle_to_y_deg(model)[0] < 2.0
+
+
+def test_what_is_not_a_twin_stays_apart():
+    """Not merged: two segments seen from one aspect (their planes coincide: the direction would rest
+    on their tilted stereo directions), two parallel edges 8 mm apart, and two segments that are both
+    already accepted with a known direction (they cover their edge already)."""
+    params = LineModelParams()
+    kind = LineSegmentType(params)
+    assert len(merged_twins(_twin_core(kind, (0.0, 2.0), (0.0, 0.002), (0.6, 0.3)), params)) == 2
+    assert len(merged_twins(_twin_core(kind, (0.0, 40.0), (0.0, 0.008), (0.6, 0.3)), params)) == 2
+    sure = _twin_core(kind, (0.0, 40.0), (0.0, 0.002), (0.9, 0.9), tilt_deg=0.5, sigma_deg=0.5)
+    assert direction_known(sure.entities, params).all()
+    assert len(merged_twins(sure, params)) == 2
+    assert len(merged_twins(_twin_core(kind, (0.0, 40.0), (0.0, 0.002), (0.9, 0.9), tilt_deg=0.5, sigma_deg=15.0),
+                            params)) == 1                       # unsure of their direction: merged
+
+
+def test_the_written_model_merges_twins_unless_told_not_to():
+    """``LineAccumulation.model()`` writes the twins merged; with ``merge_twins`` off, as accumulated."""
+    from accumcli.pipeline import AccumulateParams, LineAccumulation
+
+    for merge, expected in ((True, 1), (False, 2)):
+        acc = LineAccumulation(AccumulateParams(line_model=LineModelParams(merge_twins=merge)))
+        acc.core = _twin_core(acc.entity_type, (0.0, 40.0), (0.0, 0.002), (0.6, 0.3))
+        assert len(acc.model()) == expected and len(acc.core) == 2
