@@ -336,19 +336,24 @@ class Accumulator(Generic[E]):
         return static
 
     def consolidated(self, i: np.ndarray, j: np.ndarray, same) -> "Accumulator[E]":
-        """A copy of this accumulator with the candidate pairs (i, j) (N,) int that ``same(entities, i,
+        """A copy of this accumulator with the candidate pairs (i, j) (N,) int that ``same(accumulator, i,
         j) -> (ok (N,) bool, cost (N,))`` accepts merged as ``_consolidate`` merges duplicates, and the
-        absorbed entities dropped; this one is left as it is (the running accumulation goes on)."""
-        copy = Accumulator(self.entity_type, self.entities, self.rule)
-        everything = np.arange(len(self))
-        copy.entities = self.entity_type.select(self.entities, everything)   # fancy indexing: new arrays
+        absorbed entities dropped; this one is left as it is (the running accumulation goes on). Without
+        candidates, this one itself."""
+        if len(i) == 0:
+            return self
+        kind = self.entity_type
+        copy = Accumulator(kind, kind.select(self.entities, np.arange(len(self))), self.rule)   # new arrays
         copy.log_odds, copy.observations = self.log_odds.copy(), self.observations.copy()
         copy.views, copy.last_confirmed, copy.frame = self.views.copy(), self.last_confirmed.copy(), self.frame
+        copy.origin, copy.origin_sensed = self.origin, self.origin_sensed
         if copy._consolidate(i, j, same=same):
             kept = np.flatnonzero(np.isfinite(copy.log_odds))
-            copy.entities = self.entity_type.select(copy.entities, kept)
+            copy.entities = kind.select(copy.entities, kept)
             copy.log_odds, copy.observations = copy.log_odds[kept], copy.observations[kept]
             copy.views, copy.last_confirmed = copy.views[kept], copy.last_confirmed[kept]
+            if copy.origin is not None:
+                copy.origin, copy.origin_sensed = kind.select(copy.origin, kept), kind.select(copy.origin_sensed, kept)
         return copy
 
     def _consolidate(self, i: np.ndarray, j: np.ndarray, rounds: int = 3, same=None) -> int:
@@ -358,8 +363,8 @@ class Accumulator(Generic[E]):
         observations of the entity it doubles (merging is one-to-one) and both
         would be punished in turn. Candidates are the entities that corresponded
         to one observation: only those can have become duplicates (a new entity
-        corresponded to nothing). ``same``: another test of the pairs, as the entity type's
-        ``same(entities, i, j)``. Each round merges pairs of which no two share an entity
+        corresponded to nothing). ``same(self, i, j)``: another test of the pairs than the entity
+        type's ``same(entities, i, j)``, asked again each round. Each round merges pairs of which no two share an entity
         (``disjoint_pairs``: one_to_one, whose two sides were apart, let an entity win one merge
         and lose another, or absorb two losers of which numpy's repeated-index += kept one's
         observations and information); up to ``rounds`` rounds take the rest of a group of three or
@@ -370,7 +375,7 @@ class Accumulator(Generic[E]):
             i, j = i[alive], j[alive]
             if len(i) == 0:
                 break
-            ok, cost = (same or self.entity_type.same)(self.entities, i, j)
+            ok, cost = same(self, i, j) if same else self.entity_type.same(self.entities, i, j)
             i, j, cost = i[ok], j[ok], cost[ok]
             if len(i) == 0:
                 break

@@ -351,7 +351,8 @@ def extract(recording, output, rrd, with_2d, workers, frames, extract_params, op
 @click.option("--truth", type=click.Path(dir_okay=False, exists=True),
               help="A truth sidecar: also measure precision, completeness and background frame by frame.")
 @click.option("--history", **_OUTPUT_PATH,
-              help="Write the per-frame counts (and figures with --truth) as JSON lines.")
+              help="Write the per-frame counts of the running accumulation (and with --truth the figures of the "
+                   "model as written, its twins merged) as JSON lines.")
 @click.option("--plot", **_OUTPUT_PATH, help="Draw the per-frame counts (and figures) as a PNG.")
 @click.option("--png", **_OUTPUT_PATH,
               help="Write a picture of the model (confidence as grey level, dark = high).")

@@ -141,7 +141,7 @@ class LineModelParams:
     twin_across_m: float = 0.004      # ... overlapping, this near across each other's line ...
     twin_max_angle_deg: float = 20.0  # ... and this near in direction ...
     twin_plane_agreement: float = 0.01  # ... whose planes together meet on one line (``direction_known``'s ratio) ...
-    twin_min_view_deg: float = 5.0    # ... seen from views at least this far apart
+    twin_min_view_deg: float = 5.0    # ... seen together from views spanning at least this
 
 
 @dataclass
@@ -343,7 +343,8 @@ class LineSegmentType:
         ends = transform_points(T, model.endpoints().reshape(-1, 3))     # camera frame, as segments_in_both_images
         inside = in_both_images(ends, intr, border_distance=context.border_distance).reshape(-1, 2).all(axis=1)
         uv_left = intr.project(ends)[0]
-        d2 = (uv_left[1::2] - uv_left[0::2])
+        with np.errstate(invalid="ignore"):     # ends in the camera's plane project to infinity; not ``inside``
+            d2 = (uv_left[1::2] - uv_left[0::2])
         angle = np.degrees(np.arctan2(np.abs(d2[:, 1]), np.abs(d2[:, 0])))
         not_critical = angle >= p.critical_angle_deg + 3.0
         to_camera = (invert(T)[:3, 3] - model.centers).astype(np.float32)
@@ -366,6 +367,15 @@ def _direction_of_planes(extra: dict, directions: np.ndarray, mi: np.ndarray, p:
     pinned = (values[:, 1] - values[:, 0]) / np.radians(p.reference_direction_sigma_deg) ** 2
     extra["inv_var_direction"][mi] = np.maximum(extra["inv_var_direction"][mi], pinned)
     return u
+
+
+def _planes_figures(dir_info: np.ndarray, p: LineModelParams) -> tuple[np.ndarray, np.ndarray]:
+    """Of direction information matrices (N, 3, 3): (N,) how far their planes miss one line (the least
+    eigenvalue over the middle one) and (N,) the inverse variance (1/rad^2) that they pin the
+    direction to (the gap between the two, in ``reference_direction_sigma_deg``'s weights)."""
+    values = np.linalg.eigvalsh(dir_info)       # ascending
+    return (values[:, 0] / np.maximum(values[:, 1], 1e-300),
+            (values[:, 1] - values[:, 0]) / np.radians(p.reference_direction_sigma_deg) ** 2)
 
 
 def _plane_sigma(length_px: np.ndarray, p: LineModelParams) -> np.ndarray:
@@ -458,8 +468,7 @@ def direction_known(entities: Segments, rules: LineModelParams | None) -> np.nda
     known = inverse_variance >= np.radians(rules.max_direction_sigma_deg) ** -2.0
     if rules.plane_agreement is not None and "dir_info" in entities.extra:
         k = np.flatnonzero(known)
-        values = np.linalg.eigvalsh(entities.extra["dir_info"][k])     # ascending
-        known[k] = values[:, 0] <= rules.plane_agreement * values[:, 1]
+        known[k] = _planes_figures(entities.extra["dir_info"][k], rules)[0] <= rules.plane_agreement
     if rules.single_aspect_sigma_deg is not None:
         undecided = np.flatnonzero(known & (inverse_variance < np.radians(rules.single_aspect_sigma_deg) ** -2.0))
         known[undecided] = (_view_span(entities.extra["views"][undecided])
@@ -489,31 +498,31 @@ def twin_candidates(model: Segments, p: LineModelParams) -> tuple[np.ndarray, np
 
 def _lying_as_twins(model: Segments, i: np.ndarray, j: np.ndarray, p: LineModelParams) -> np.ndarray:
     """(K,) bool: the pairs (i, j) overlap along their lines, within ``twin_across_m`` across each
-    other's and ``twin_max_angle_deg`` in direction (``merged_twins``)."""
+    other's and ``twin_max_angle_deg`` in direction, neither more than ``max_extent`` times the other's
+    length (``merge`` keeps a merged segment within that many of the absorbed one's lengths: a long
+    segment would come out shorter)."""
     c, u, length = model.centers, model.directions, model.lengths
     rel = c[j] - c[i]
     along = np.sum(rel * u[i], axis=1)
     across = np.maximum(np.linalg.norm(rel - along[:, None] * u[i], axis=1),
                         np.linalg.norm(rel - np.sum(rel * u[j], axis=1)[:, None] * u[j], axis=1))
     return (across <= p.twin_across_m) & (np.abs(along) <= (length[i] + length[j]) / 2) & (
-        np.abs(np.sum(u[i] * u[j], axis=1)) >= np.cos(np.radians(p.twin_max_angle_deg)))   # either sign
+        d_o(u[i], u[j]) <= np.radians(p.twin_max_angle_deg)) & (
+        np.maximum(length[i], length[j]) <= p.max_extent * np.minimum(length[i], length[j]))
 
 
 def twins(model: Segments, i: np.ndarray, j: np.ndarray, settled: np.ndarray, p: LineModelParams):
     """(ok (K,) bool, cost (K,)) of the pairs (i, j) of model segments: twins of one edge (``merged_twins``),
-    cost the planes' disagreement (least over middle eigenvalue of the summed ``dir_info``). ``settled``
-    (N,) bool: segments already accepted with a known direction; a pair of two is left alone."""
+    cost how far their planes together miss one line (``_planes_figures``). ``settled`` (N,) bool:
+    segments already accepted with a known direction; a pair of two is left alone."""
     views = model.extra["views"]
-    present_i, present_j = views[i].any(axis=2), views[j].any(axis=2)
-    cosine = np.einsum("kmc,knc->kmn", views[i], views[j])
-    widest = np.where(present_i[:, :, None] & present_j[:, None, :], cosine, 1.0).min(axis=(1, 2), initial=1.0)
-    values = np.linalg.eigvalsh(model.extra["dir_info"][i] + model.extra["dir_info"][j])      # ascending
-    pinned = (values[:, 1] - values[:, 0]) / np.radians(p.reference_direction_sigma_deg) ** 2
+    span = _view_span(np.concatenate([views[i], views[j]], axis=1))
+    agreement, pinned = _planes_figures(model.extra["dir_info"][i] + model.extra["dir_info"][j], p)
     ok = _lying_as_twins(model, i, j, p) & ~(settled[i] & settled[j]) & (
-        widest <= np.cos(np.radians(p.twin_min_view_deg))) & (values[:, 0] <= p.twin_plane_agreement * values[:, 1])
+        span >= np.radians(p.twin_min_view_deg)) & (agreement <= p.twin_plane_agreement)
     if p.max_direction_sigma_deg is not None:
         ok &= pinned >= np.radians(p.max_direction_sigma_deg) ** -2.0
-    return ok, values[:, 0] / np.maximum(values[:, 1], 1e-300)
+    return ok, agreement
 
 
 def merged_twins(core, p: LineModelParams):
@@ -532,27 +541,31 @@ def merged_twins(core, p: LineModelParams):
     3 to 4 mm apart) and ``twin_max_angle_deg`` of each other's direction; not both are accepted with a
     known direction (two such already cover their edge; merged too, they lowered the precision, which
     counts segments, on every devset row: the model shrank by a third and its wrong segments stayed);
-    their views are at least ``twin_min_view_deg`` apart (from one aspect their planes coincide and
+    their views together span at least ``twin_min_view_deg`` (from one aspect their planes coincide and
     the merged direction would rest on their stereo directions alone: on sim_103 chains of such
     segments merged into 74 mm segments 16 degrees off); their summed ``dir_info`` has its least
     eigenvalue at most ``twin_plane_agreement`` times the middle one (the planes meet on one line) and
-    pins the direction to ``max_direction_sigma_deg``. Once, as the model is written (below).
+    pins the direction to ``max_direction_sigma_deg``. Whenever the model is written (``LineAccumulation.model``),
+    not in the running accumulation (below).
 
     Measured on ``make suite``'s recordings (accumulation alone, 4 runs a row, 2026-12-07): completeness
-    median 0.673 -> 0.693, mean 0.691 -> 0.708, worst row 0.359 -> 0.371 (every row the same or up,
-    sim_103 0.830 -> 0.866, sim_107 0.718 -> 0.752, dev_steps 0.653 -> 0.676), precision median 0.963 ->
-    0.965, mean 0.944 -> 0.942; three rows at 0.950 or 0.951 fell under 0.95 (sim_102 0.947, sim_111
-    0.948, dev_wedge_far 0.946: by less than a standard deviation of their runs), sim_105 0.930 -> 0.919,
-    the real teabox's surface precision 0.543 -> 0.536. Not hanging on the limits: 3 mm, 10 degrees and
+    median 0.673 -> 0.693, mean 0.691 -> 0.708, worst row 0.359 -> 0.372 (every row the same or up,
+    sim_103 0.830 -> 0.867, sim_107 0.718 -> 0.752, dev_steps 0.653 -> 0.676), precision median 0.963 ->
+    0.966, mean 0.944 -> 0.941; three rows at 0.950 or 0.951 fell under 0.95 (sim_102 0.948, sim_111
+    0.943, dev_wedge_far 0.948: by less than a standard deviation of their runs), sim_105 0.930 -> 0.920,
+    the real teabox's surface precision 0.543 -> 0.538. Not hanging on the limits: 3 mm, 10 degrees and
     0.006 gave completeness median 0.692, mean 0.703, precision median 0.963. Merged in the running
     accumulation every fourth frame instead (same measure): completeness median 0.694, mean 0.704
     (dev_wedge_far 0.502), precision median 0.970: no better, and the accumulation's own rules then
     judge merged segments they did not build."""
     if len(core) < 2 or "dir_info" not in core.entities.extra:    # without ``view_planes`` there are no planes
         return core
-    i, j = twin_candidates(core.entities, p)
-    settled = (core.log_odds >= 0) & direction_known(core.entities, p)
-    return core.consolidated(i, j, lambda model, a, b: twins(model, a, b, settled, p))
+
+    def same(accumulator, a, b):     # settled as of each round: a winner may have become so
+        settled = (accumulator.log_odds >= 0) & direction_known(accumulator.entities, p)
+        return twins(accumulator.entities, a, b, settled, p)
+
+    return core.consolidated(*twin_candidates(core.entities, p), same)
 
 
 def to_model(entities: Segments, confidence: np.ndarray, observations: np.ndarray,

@@ -591,6 +591,10 @@ CORPUS = {  # name: (class, expected outcome, how to make it)
                                        right_times=[-PERIOD, -2 * PERIOD, -2 * PERIOD],
                                        tf=[("camera_left", "gripper", t, (0, 0, 0.5), (0, 0, 0, 1))
                                            for t in (-2 * PERIOD, -PERIOD, -2 * PERIOD)])),
+    "object_behind_camera": ("a pose putting the object 1 m behind the camera (a numpy RuntimeWarning on the "
+                             "terminal, 2026-12-07)", "ok",
+                             lambda p: build(p, tf=_tf(r2=("camera_left", "gripper", T0 + 2 * PERIOD, (0.02, 0, -1),
+                                                           (0, 0, 0, 1))))),
     "tf_cycle": ("a cycle in the tf tree", "warning: has several parents",
                  lambda p: build(p, tf=[("camera_left", "gripper", T0, (0, 0, 0.5), (0, 0, 0, 1)),
                                         ("gripper", "camera_left", T0, (0, 0, -0.4), (0, 0, 0, 1)),

@@ -521,20 +521,21 @@ def test_planes_of_unmatched_pieces_from_another_aspect_pin_a_direction_stereo_t
     assert direction_known(model, rules)[0]
 
 
-def _twin_core(kind: LineSegmentType, turns_deg, offsets_m, confidences, tilt_deg=12.0, sigma_deg=15.0) -> Accumulator:
+def _twin_core(kind: LineSegmentType, turns_deg, offsets_m, confidences, tilt_deg=12.0, sigma_deg=15.0,
+               lengths_m=(0.012, 0.012)) -> Accumulator:
     """An accumulator of segments along y, one per camera turned ``turns_deg`` about y, each at
     ``offsets_m`` along x and triangulated ``tilt_deg`` tilted towards its camera (within its view plane,
-    stereo's weak direction), claiming a direction sigma of ``sigma_deg``, at ``confidences``."""
+    stereo's weak direction), claiming a direction sigma of ``sigma_deg``, at ``confidences``, ``lengths_m`` long."""
     core = Accumulator(kind, kind.empty("gripper"))
     core.entities = kind.empty("gripper")
-    for turn, offset in zip(turns_deg, offsets_m):
+    for turn, offset, length in zip(turns_deg, offsets_m, lengths_m):
         T = make_transform(Rotation.from_rotvec([0, np.radians(turn), 0]).as_matrix(), [0.0, 0.0, 0.5])
         camera = invert(T)[:3, 3]
         toward = camera - camera[1] * np.array([0.0, 1.0, 0.0])
         toward /= np.linalg.norm(toward)
         segment = _one_segment(tuple(np.cos(np.radians(tilt_deg)) * np.array([0.0, 1.0, 0.0])
                                      + np.sin(np.radians(tilt_deg)) * toward))
-        segment.centers = np.array([[offset, 0.0, 0.0]])
+        segment.centers, segment.lengths = np.array([[offset, 0.0, 0.0]]), np.array([length])
         segment.extra["sigma_direction_rad"] = np.array([np.radians(sigma_deg)])
         core.entities = kind.concatenate(core.entities, kind.observe(segment, FrameContext(T, INTR)))
     n = len(turns_deg)
@@ -572,12 +573,20 @@ def test_twins_of_one_edge_from_two_aspects_are_merged_as_the_model_is_written()
 
 def test_what_is_not_a_twin_stays_apart():
     """Not merged: two segments seen from one aspect (their planes coincide: the direction would rest
-    on their tilted stereo directions), two parallel edges 8 mm apart, and two segments that are both
-    already accepted with a known direction (they cover their edge already)."""
+    on their stereo directions, sure or not), two parallel edges 8 mm apart, one more than 3 times the
+    other's length (``merge`` would trim it), and two segments that are both already accepted with a
+    known direction (they cover their edge already)."""
     params = LineModelParams()
     kind = LineSegmentType(params)
     assert len(merged_twins(_twin_core(kind, (0.0, 2.0), (0.0, 0.002), (0.6, 0.3)), params)) == 2
+    one_aspect = _twin_core(kind, (0.0, 2.0), (0.0, 0.002), (0.4, 0.3), tilt_deg=0.5, sigma_deg=1.0)
+    assert len(merged_twins(one_aspect, params)) == 2           # their stereo directions alone would pin it
+    assert len(merged_twins(one_aspect, LineModelParams(twin_min_view_deg=0.0))) == 1
     assert len(merged_twins(_twin_core(kind, (0.0, 40.0), (0.0, 0.008), (0.6, 0.3)), params)) == 2
+    lengths = (0.040, 0.012)       # merged, the 40 mm one would be trimmed to 3 times the 12 mm one
+    assert len(merged_twins(_twin_core(kind, (0.0, 40.0), (0.0, 0.002), (0.6, 0.3), lengths_m=lengths), params)) == 2
+    assert len(merged_twins(_twin_core(kind, (0.0, 40.0), (0.0, 0.002), (0.6, 0.3), lengths_m=(0.030, 0.012)),
+                            params)) == 1
     sure = _twin_core(kind, (0.0, 40.0), (0.0, 0.002), (0.9, 0.9), tilt_deg=0.5, sigma_deg=0.5)
     assert direction_known(sure.entities, params).all()
     assert len(merged_twins(sure, params)) == 2

@@ -32,6 +32,7 @@ def test_index_names_every_input_and_the_corpus_is_small():
     assert {cls[0] for _, cls, _ in entries() if cls[0].isdigit()} == set("12345678")
 
 
+@pytest.mark.filterwarnings("error::RuntimeWarning")   # numpy's, which the fuzzer counts as foreign output
 @pytest.mark.parametrize("name, cls, outcome", entries(), ids=[e[0] for e in entries()])
 def test_corpus_input(name, cls, outcome, caplog, capfd, monkeypatch):
     monkeypatch.setattr(logging.getLogger("accumcli"), "handlers", [])  # the CLI's, if a CLI test ran before
