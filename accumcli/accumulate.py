@@ -364,8 +364,8 @@ class Accumulator(Generic[E]):
         would be punished in turn. Candidates are the entities that corresponded
         to one observation: only those can have become duplicates (a new entity
         corresponded to nothing). ``same(self, i, j)``: another test of the pairs than the entity
-        type's ``same(entities, i, j)``, asked again each round. Each round merges pairs of which no two share an entity
-        (``disjoint_pairs``: one_to_one, whose two sides were apart, let an entity win one merge
+        type's ``same(entities, i, j)``, asked again each round. Each round merges pairs of which
+        no two share an entity (``disjoint_pairs``: one_to_one, whose two sides were apart, let an entity win one merge
         and lose another, or absorb two losers of which numpy's repeated-index += kept one's
         observations and information); up to ``rounds`` rounds take the rest of a group of three or
         more (merging them in one frame, as before, keeps ``make motion``'s figures)."""

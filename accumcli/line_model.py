@@ -480,7 +480,7 @@ def twin_candidates(model: Segments, p: LineModelParams) -> tuple[np.ndarray, np
     """Pairs (i, j) (K,) int of model segments that lie as twins do (``_lying_as_twins``). Their centres
     are at most the longer one's length (and ``twin_across_m``) apart: the pairs of the shorter nine
     tenths within the reach of their longest, then those of the longest tenth with all (one reach for all,
-    that of the model's longest segment, gave 15 times as many pairs)."""
+    that of the model's longest segment, gave many times as many pairs to test)."""
     if len(model) < 2:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
     tree, reach = cKDTree(model.centers), model.lengths + p.twin_across_m
@@ -530,8 +530,8 @@ def merged_twins(core, p: LineModelParams):
     merged, as the model is written (``LineAccumulation``); ``core`` is left as it is.
 
     Twins: two model segments of one edge built from different aspects, each holding the observations
-    of its own. A short piece's stereo direction tilts in depth (on the devset 13 to 27 % of the
-    matched length on edges is more than 10 degrees off), so the same edge seen a little later lands
+    of its own. A short piece's stereo direction tilts in depth (on the suite's recordings 13 to 27 % of
+    the matched length on edges is more than 10 degrees off), so the same edge seen a little later lands
     beside the segment, or off its direction by more than the gate, and starts one of its own; each
     twin then has one aspect, and its direction stays unsure (held back, ``to_model``) or it is never
     confirmed. But the plane through the camera and a piece holds the edge whatever its tilt, so the
@@ -540,13 +540,14 @@ def merged_twins(core, p: LineModelParams):
     along their lines and lie within ``twin_across_m`` across each other's (the devset's held twins lie
     3 to 4 mm apart) and ``twin_max_angle_deg`` of each other's direction; not both are accepted with a
     known direction (two such already cover their edge; merged too, they lowered the precision, which
-    counts segments, on every devset row: the model shrank by a third and its wrong segments stayed);
+    counts segments, on every devset row: the accepted model shrank by up to half, dev_wedge_far's 99
+    segments to 45, and its wrong segments stayed);
     their views together span at least ``twin_min_view_deg`` (from one aspect their planes coincide and
     the merged direction would rest on their stereo directions alone: on sim_103 chains of such
     segments merged into 74 mm segments 16 degrees off); their summed ``dir_info`` has its least
     eigenvalue at most ``twin_plane_agreement`` times the middle one (the planes meet on one line) and
-    pins the direction to ``max_direction_sigma_deg``. Whenever the model is written (``LineAccumulation.model``),
-    not in the running accumulation (below).
+    pins the direction to ``max_direction_sigma_deg``. Whenever the model is written
+    (``LineAccumulation.model``), not in the running accumulation (below).
 
     Measured on ``make suite``'s recordings (accumulation alone, 4 runs a row, 2026-12-07): completeness
     median 0.673 -> 0.693, mean 0.691 -> 0.708, worst row 0.359 -> 0.372 (every row the same or up,
