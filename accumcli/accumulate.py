@@ -342,19 +342,19 @@ class Accumulator(Generic[E]):
         candidates, this one itself."""
         if len(i) == 0:
             return self
+        copy = self._selected(np.arange(len(self)))
+        return copy._selected(np.flatnonzero(np.isfinite(copy.log_odds))) if copy._consolidate(i, j, same=same) \
+            else copy
+
+    def _selected(self, index: np.ndarray) -> "Accumulator[E]":
+        """A new accumulator of the entities at ``index`` (K,) int, every per-entity state in new arrays."""
         kind = self.entity_type
-        copy = Accumulator(kind, kind.select(self.entities, np.arange(len(self))), self.rule)   # new arrays
-        copy.log_odds, copy.observations = self.log_odds.copy(), self.observations.copy()
-        copy.views, copy.last_confirmed, copy.frame = self.views.copy(), self.last_confirmed.copy(), self.frame
-        copy.origin, copy.origin_sensed = self.origin, self.origin_sensed
-        if copy._consolidate(i, j, same=same):
-            kept = np.flatnonzero(np.isfinite(copy.log_odds))
-            copy.entities = kind.select(copy.entities, kept)
-            copy.log_odds, copy.observations = copy.log_odds[kept], copy.observations[kept]
-            copy.views, copy.last_confirmed = copy.views[kept], copy.last_confirmed[kept]
-            if copy.origin is not None:
-                copy.origin, copy.origin_sensed = kind.select(copy.origin, kept), kind.select(copy.origin_sensed, kept)
-        return copy
+        out = Accumulator(kind, kind.select(self.entities, index), self.rule)
+        out.log_odds, out.observations = self.log_odds[index], self.observations[index]
+        out.views, out.last_confirmed, out.frame = self.views[index], self.last_confirmed[index], self.frame
+        if self.origin is not None:
+            out.origin, out.origin_sensed = kind.select(self.origin, index), kind.select(self.origin_sensed, index)
+        return out
 
     def _consolidate(self, i: np.ndarray, j: np.ndarray, rounds: int = 3, same=None) -> int:
         """Merge model entities (candidate pairs i, j) that the entity type deems the same:

@@ -562,8 +562,10 @@ def merged_twins(core, p: LineModelParams):
     if len(core) < 2 or "dir_info" not in core.entities.extra:    # without ``view_planes`` there are no planes
         return core
 
-    def same(accumulator, a, b):     # settled as of each round: a winner may have become so
-        settled = (accumulator.log_odds >= 0) & direction_known(accumulator.entities, p)
+    def same(accumulator, a, b):     # settled as of each round (a winner may have become so), of the pairs' only
+        settled = np.zeros(len(accumulator), bool)
+        k = np.unique(np.concatenate([a, b]))
+        settled[k] = (accumulator.log_odds[k] >= 0) & direction_known(accumulator.entities.select(k), p)
         return twins(accumulator.entities, a, b, settled, p)
 
     return core.consolidated(*twin_candidates(core.entities, p), same)

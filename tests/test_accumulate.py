@@ -190,6 +190,16 @@ def _copy(observed: Segments) -> Segments:
                     {"sigma_depth_m": np.array([0.001]), "sigma_direction_rad": np.array([np.radians(6.0)])})
 
 
+def _tilted_towards_camera(turn_deg: float, tilt_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """(T_camera_object of a camera turned ``turn_deg`` about y at 0.5 m, the unit direction y tilted
+    ``tilt_deg`` towards that camera: within the plane through it and the y axis, stereo's weak direction)."""
+    T = make_transform(Rotation.from_rotvec([0, np.radians(turn_deg), 0]).as_matrix(), [0.0, 0.0, 0.5])
+    camera = invert(T)[:3, 3]                                   # in the object frame
+    toward = camera - camera[1] * np.array([0.0, 1.0, 0.0])     # across y, towards the camera
+    toward /= np.linalg.norm(toward)
+    return T, np.cos(np.radians(tilt_deg)) * np.array([0.0, 1.0, 0.0]) + np.sin(np.radians(tilt_deg)) * toward
+
+
 def test_two_views_planes_pin_the_direction_that_stereo_tilts():
     """A segment along y seen from two views 40 degrees apart about it, each triangulated 15 degrees
     tilted towards its camera (stereo's weak direction, within the plane through the camera and the
@@ -198,11 +208,7 @@ def test_two_views_planes_pin_the_direction_that_stereo_tilts():
     kind = LineSegmentType()
     views = []
     for turn_deg in (0.0, 40.0):
-        T = make_transform(Rotation.from_rotvec([0, np.radians(turn_deg), 0]).as_matrix(), [0.0, 0.0, 0.5])
-        camera = invert(T)[:3, 3]                                   # in the object frame
-        toward = camera - camera[1] * np.array([0.0, 1.0, 0.0])     # across y, towards the camera
-        toward /= np.linalg.norm(toward)
-        tilted = np.cos(np.radians(15)) * np.array([0.0, 1.0, 0.0]) + np.sin(np.radians(15)) * toward
+        T, tilted = _tilted_towards_camera(turn_deg, 15.0)
         segment = _one_segment(tuple(tilted))
         segment.extra["sigma_direction_rad"] = np.array([np.radians(6.0)])
         observed = kind.observe(segment, FrameContext(T, INTR))
@@ -529,12 +535,8 @@ def _twin_core(kind: LineSegmentType, turns_deg, offsets_m, confidences, tilt_de
     core = Accumulator(kind, kind.empty("gripper"))
     core.entities = kind.empty("gripper")
     for turn, offset, length in zip(turns_deg, offsets_m, lengths_m):
-        T = make_transform(Rotation.from_rotvec([0, np.radians(turn), 0]).as_matrix(), [0.0, 0.0, 0.5])
-        camera = invert(T)[:3, 3]
-        toward = camera - camera[1] * np.array([0.0, 1.0, 0.0])
-        toward /= np.linalg.norm(toward)
-        segment = _one_segment(tuple(np.cos(np.radians(tilt_deg)) * np.array([0.0, 1.0, 0.0])
-                                     + np.sin(np.radians(tilt_deg)) * toward))
+        T, tilted = _tilted_towards_camera(turn, tilt_deg)
+        segment = _one_segment(tuple(tilted))
         segment.centers, segment.lengths = np.array([[offset, 0.0, 0.0]]), np.array([length])
         segment.extra["sigma_direction_rad"] = np.array([np.radians(sigma_deg)])
         core.entities = kind.concatenate(core.entities, kind.observe(segment, FrameContext(T, INTR)))
