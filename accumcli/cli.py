@@ -352,7 +352,8 @@ def extract(recording, output, rrd, with_2d, workers, frames, extract_params, op
               help="A truth sidecar: also measure precision, completeness and background frame by frame.")
 @click.option("--history", **_OUTPUT_PATH,
               help="Write the per-frame counts of the running accumulation (and with --truth the figures of the "
-                   "model as written, its twins merged) as JSON lines.")
+                   "model as written, its twins merged and held segments given the dominant directions) as JSON "
+                   "lines.")
 @click.option("--plot", **_OUTPUT_PATH, help="Draw the per-frame counts (and figures) as a PNG.")
 @click.option("--png", **_OUTPUT_PATH,
               help="Write a picture of the model (confidence as grey level, dark = high).")
@@ -386,14 +387,18 @@ def extract(recording, output, rrd, with_2d, workers, frames, extract_params, op
               help="Write the model with the twins of an edge merged: segments built from different aspects beside "
                    "each other whose view planes together pin the edge (stereo tilted each; neither is sure of its "
                    "direction alone; needs --view-planes); --keep-twins writes them as accumulated.")
+@click.option("--dominant-directions/--own-directions", default=True, show_default=True,
+              help="A segment confirmed but unsure of its direction takes the direction that the model's accepted "
+                   "segments share, where its view plane holds that one and its own direction lies near it (the "
+                   "edges of made objects share a few directions); --own-directions holds it back instead.")
 @box_option
 @frame_workers_option
 @frames_option
 @extraction_options
 @recording_options
 def accumulate(recording, outputs, ply_all, rrd, truth, history, plot, png, panel, motion, poses, position_threshold,
-               angle_threshold, view_planes, plane_agreement, merge_twins, box, workers, frames, extract_params,
-               options):
+               angle_threshold, view_planes, plane_agreement, merge_twins, dominant_directions, box, workers, frames,
+               extract_params, options):
     """Accumulate a model of the object over the recording, with the gripper's known motion.
 
     \b
@@ -401,6 +406,7 @@ def accumulate(recording, outputs, ply_all, rrd, truth, history, plot, png, pane
       accum accumulate sample_data/sim_box.mcap -o out/model.json -o out/model.ply --rrd out/run.rrd
       accum accumulate sample_data/chessboard/chessboard.mcap --object-frame board -o out/board.json
     """
+    from .dominant_directions import DominantParams
     from .line_model import LineModelParams
     from .metric import MetricThresholds
     from .pipeline import AccumulateParams
@@ -414,7 +420,8 @@ def accumulate(recording, outputs, ply_all, rrd, truth, history, plot, png, pane
         raise click.UsageError("--plane-agreement tests the planes of --view-planes; --average-directions has none")
     line_model = LineModelParams(thresholds=MetricThresholds(position_threshold / 1000.0, angle_threshold),
                                  view_planes=view_planes, plane_agreement=plane_agreement,
-                                 merge_twins=merge_twins)
+                                 merge_twins=merge_twins,
+                                 dominant=DominantParams() if dominant_directions else None)
     params = AccumulateParams(extract=extract_params, line_model=line_model, motion=motion, box=box)
     result = run_with_progress("accumulating", accumulate_recording, recording, outputs, params=params,
                                options=options, frames=frames, truth=truth, history=history, plot=plot, rrd=rrd,

@@ -93,6 +93,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .dominant_directions import DominantParams, dominant_directions
 from .edge_evidence import edge_evidence
 from .geometry import check_points, check_transform, invert, outer, transform_points
 from .grouping import best_per_key
@@ -142,6 +143,7 @@ class LineModelParams:
     twin_max_angle_deg: float = 20.0  # ... and this near in direction ...
     twin_plane_agreement: float = 0.01  # ... whose planes together meet on one line (``direction_known``'s ratio) ...
     twin_min_view_deg: float = 5.0    # ... seen together from views spanning at least this
+    dominant: DominantParams | None = DominantParams()  # held directions from the model's shared ones (None: off)
 
 
 @dataclass
@@ -581,7 +583,9 @@ def to_model(entities: Segments, confidence: np.ndarray, observations: np.ndarra
     accumulation does not need) the standard deviation of its position across its direction (m).
 
     ``rules`` (the run's ``LineModelParams``; None: none) decide which directions are sure enough
-    (``direction_known``). A segment whose direction sigma exceeds ``max_direction_sigma_deg`` is
+    (``direction_known``), and, with ``rules.dominant``, give held segments the direction that the
+    accepted ones share where their view plane holds it (``dominant_directions``: then accepted,
+    ``direction_dominant``). A segment whose direction sigma exceeds ``max_direction_sigma_deg`` is
     not accepted, whatever its confidence (written at most ``UNSURE_CONFIDENCE``): its existence is
     confirmed, its line is not. Such segments are seen from one aspect by pieces alone on their stretch, whose direction
     stereo leaves unsure (``stereo``: 1 degree, or a short line's fit, over the sine of their planes' angle); more aspects
@@ -620,20 +624,30 @@ def to_model(entities: Segments, confidence: np.ndarray, observations: np.ndarra
     cones that tracking relies on (false tracked frames on the tracking scoreboard)."""
     extra = entities.extra
     known = direction_known(entities, rules)
-    held = ~known & (np.asarray(confidence) >= 0.5)
-    confidence = np.where(known, confidence, np.minimum(confidence, UNSURE_CONFIDENCE))
+    confident = np.asarray(confidence) >= 0.5
     views = extra["views"]
     mean_view = _unit(views.sum(axis=1))
+    directions, sigma = entities.directions, 1.0 / np.sqrt(extra["inv_var_direction"])
+    dominant = np.zeros(len(entities), bool)
+    if rules is not None and rules.dominant is not None:
+        settled = confident & known     # and seen from more than one aspect (``dominant_directions``)
+        k = np.flatnonzero(settled)
+        settled[k] = _view_span(views[k]) > np.radians(rules.single_aspect_span_deg) + 1e-9
+        dominant, directions, sigma = dominant_directions(entities, mean_view, sigma, settled, confident & ~known,
+                                                          rules.dominant)
+        known = known | dominant
+    held = ~known & confident
+    confidence = np.where(known, confidence, np.minimum(confidence, UNSURE_CONFIDENCE))
     cosines = np.where(views.any(axis=2), np.einsum("nkj,nj->nk", views, mean_view), 1.0)
     spread = np.degrees(np.arccos(np.clip(cosines.min(axis=1, initial=1.0), -1, 1)))
-    columns = {"direction_held": held, "view_direction": mean_view, "view_spread_deg": spread,
-               "sigma_direction_rad": 1.0 / np.sqrt(extra["inv_var_direction"])}
+    columns = {"direction_held": held, "direction_dominant": dominant, "view_direction": mean_view,
+               "view_spread_deg": spread, "sigma_direction_rad": sigma}
     if uncertainty:
         covariance = np.linalg.inv(extra["info"]) if len(entities) else np.zeros((0, 3, 3))
-        u = entities.directions
+        u = directions
         across = np.trace(covariance, axis1=1, axis2=2) - np.einsum("ni,nij,nj->n", u, covariance, u)
         columns["sigma_m"] = np.sqrt(np.maximum(across, 0) / 2)
-    return Segments(entities.frame_id, entities.centers, entities.directions, entities.lengths,
+    return Segments(entities.frame_id, entities.centers, directions, entities.lengths,
                     np.asarray(confidence, float), np.asarray(observations, np.int64), columns)
 
 

@@ -1,0 +1,110 @@
+"""A held segment takes the model's dominant direction that its view plane holds
+(``accumcli.dominant_directions``), and only then."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from accumcli.dominant_directions import DominantParams, dominant_directions
+from accumcli.line_model import FrameContext, LineModelParams, LineSegmentType, to_model
+from accumcli.segments import Segments
+from tests.test_accumulate import INTR, _tilted_towards_camera
+
+Y = np.array([0.0, 1.0, 0.0])
+TOWARDS_CAMERA = np.array([0.0, 0.0, -1.0])     # the camera at z = -0.5 m, object frame
+
+
+def _turned(direction, axis, deg) -> np.ndarray:
+    return Rotation.from_rotvec(np.radians(deg) * np.asarray(axis, float)).apply(direction)
+
+
+def _box_edges(y_directions=4, offset_deg=0.0):
+    """Accepted segments (centres (M, 3) m, directions (M, 3)): 4 along x, ``y_directions`` along y
+    (turned by ``offset_deg`` towards the camera, within the held segment's view plane), 4 along z; each
+    direction about 0.5 degrees off its axis, 20 mm long, all at least 30 mm from the origin."""
+    rng = np.random.default_rng(1)
+    centers, directions = [], []
+    for axis, n in ((np.array([1.0, 0, 0]), 4), (_turned(Y, [1, 0, 0], -offset_deg), y_directions),
+                    (np.array([0, 0, 1.0]), 4)):
+        for k in range(n):
+            centers.append(np.array([0.03 + 0.01 * k, -0.03, 0.04 * (k % 2)]))
+            directions.append(_turned(axis, rng.normal(size=3), 0.5))
+    return np.array(centers), np.array(directions)
+
+
+def _model(held_sigma_deg=10.0, tilt_deg=12.0, extra_centers=(), extra_directions=(), **box):
+    """Segments (the held one first, at the origin: y tilted ``tilt_deg`` towards the camera, within its
+    view plane), view directions (N, 3), direction sigmas (N,) rad, settled (N,) bool, held (N,) bool."""
+    centers, directions = _box_edges(**box)
+    centers = np.vstack([np.zeros((1, 3)), centers, np.reshape(extra_centers, (-1, 3))])
+    tilted = np.cos(np.radians(tilt_deg)) * Y + np.sin(np.radians(tilt_deg)) * TOWARDS_CAMERA
+    directions = np.vstack([tilted, directions, np.reshape(extra_directions, (-1, 3))])
+    n = len(centers)
+    segments = Segments("gripper", centers, directions, np.full(n, 0.02), np.full(n, 0.9), np.full(n, 5, np.int64), {})
+    sigma = np.full(n, np.radians(0.5))
+    sigma[0] = np.radians(held_sigma_deg)
+    held = np.zeros(n, bool)
+    held[0] = True
+    return segments, np.tile(TOWARDS_CAMERA, (n, 1)), sigma, ~held, held
+
+
+def _angle_deg(a, b) -> float:
+    return float(np.degrees(np.arccos(min(1.0, abs(np.dot(a, b))))))
+
+
+def test_a_held_segment_takes_the_dominant_direction_its_view_plane_holds():
+    """Tilted 12 degrees in depth and unsure by 10: it takes the y edges' mean direction (within a degree
+    of y), a sigma from their scatter, and nothing else changes."""
+    segments, view, sigma, settled, held = _model()
+    taken, directions, new_sigma = dominant_directions(segments, view, sigma, settled, held)
+    assert taken.tolist() == [True] + [False] * (len(segments) - 1)
+    assert _angle_deg(directions[0], Y) < 1.0 and np.dot(directions[0], segments.directions[0]) > 0
+    assert np.radians(0.5) <= new_sigma[0] < np.radians(2.0)
+    assert np.array_equal(directions[1:], segments.directions[1:]) and np.array_equal(new_sigma[1:], sigma[1:])
+
+
+def test_what_the_dominant_directions_do_not_decide():
+    """Not taken: a turn beyond 2 sigmas (a segment sure to 3 degrees, turned by 12), a direction shared by
+    one accepted segment only, a plane holding two directions alike (y and y turned 16 degrees within
+    it), a stretch an accepted parallel segment 5 mm away already covers, a direction 30 degrees off
+    every accepted one. With no settled segment at all nothing is taken either."""
+    cases = [dict(held_sigma_deg=3.0), dict(y_directions=1), dict(tilt_deg=30.0),
+             dict(extra_centers=[0.005, 0.0, 0.0], extra_directions=Y)]
+    for case in cases:
+        segments, view, sigma, settled, held = _model(**case)
+        assert not dominant_directions(segments, view, sigma, settled, held)[0].any(), case
+    segments, view, sigma, settled, held = _model()
+    split = _model(extra_centers=np.tile([0.06, 0.03, 0.0], (4, 1)) + np.arange(4)[:, None] * [0.0, 0.0, 0.01],
+                   extra_directions=np.tile(_turned(Y, [1, 0, 0], -16.0), (4, 1)))
+    assert _angle_deg(split[0].directions[-1], split[0].directions[0]) < 20.0          # a candidate too
+    assert not dominant_directions(*split)[0].any()
+    assert not dominant_directions(segments, view, sigma, np.zeros(len(segments), bool), held)[0].any()
+    assert dominant_directions(segments, view, sigma, settled, held, DominantParams(share=0.9))[0][0]
+
+
+def test_the_written_model_accepts_a_held_segment_by_the_dominant_direction_unless_told_not_to():
+    """Through ``to_model``: a segment along y seen from one camera, tilted 12 degrees towards it and
+    unsure (10 degrees), is held back alone; beside five sure segments along y seen from two aspects it
+    is accepted along y and marked ``direction_dominant``. It stays held with ``LineModelParams.dominant``
+    None, and where the five were seen from one aspect only (their directions then rest on stereo
+    alone, as on a recording that barely turns)."""
+    kind = LineSegmentType()
+    T, tilted = _tilted_towards_camera(0.0, 12.0)
+    centers = np.vstack([np.zeros((1, 3)), [[0.03 + 0.01 * k, 0.0, 0.0] for k in range(5)]])
+    directions = np.vstack([tilted, np.tile(Y, (5, 1))])
+    n = len(centers)
+    segments = Segments("gripper", centers, directions, np.full(n, 0.02), np.full(n, 0.9), np.ones(n, np.int64),
+                        {"sigma_depth_m": np.full(n, 0.001),
+                         "sigma_direction_rad": np.radians(np.r_[10.0, np.full(n - 1, 0.5)])})
+    one_aspect = kind.observe(segments, FrameContext(T, INTR))
+    entities = kind.observe(segments, FrameContext(T, INTR))
+    entities.extra["views"][1:, 1] = _turned(entities.extra["views"][1:, 0], Y, 30.0)
+    confidence, observations = np.full(n, 0.8), np.full(n, 3, np.int64)
+    model = to_model(entities, confidence, observations, rules=LineModelParams())
+    assert model.accepted.all() and model.extra["direction_dominant"].tolist() == [True] + [False] * (n - 1)
+    assert _angle_deg(model.directions[0], Y) < 0.5 and not model.extra["direction_held"].any()
+    for off in (to_model(entities, confidence, observations, rules=LineModelParams(dominant=None)),
+                to_model(one_aspect, confidence, observations, rules=LineModelParams())):
+        assert not off.accepted[0] and off.extra["direction_held"][0] and not off.extra["direction_dominant"].any()
+        assert _angle_deg(off.directions[0], Y) > 11.0 and off.accepted[1:].all()
