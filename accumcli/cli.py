@@ -388,9 +388,10 @@ def extract(recording, output, rrd, with_2d, workers, frames, extract_params, op
                    "each other whose view planes together pin the edge (stereo tilted each; neither is sure of its "
                    "direction alone; needs --view-planes); --keep-twins writes them as accumulated.")
 @click.option("--dominant-directions/--own-directions", default=True, show_default=True,
-              help="A segment confirmed but unsure of its direction takes the direction that the model's accepted "
-                   "segments share, where its view plane holds that one and its own direction lies near it (the "
-                   "edges of made objects share a few directions); --own-directions holds it back instead.")
+              help="A segment confirmed but unsure of its direction, and each frame's 3D segment unsure of its own, "
+                   "take the direction that the model's accepted segments share, where their view plane holds that "
+                   "one and their own direction lies near it (the edges of made objects share a few directions); "
+                   "--own-directions keeps their own.")
 @box_option
 @frame_workers_option
 @frames_option

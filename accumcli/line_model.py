@@ -93,7 +93,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .dominant_directions import DominantParams, dominant_directions
+from .dominant_directions import DominantParams, covered, dominant_directions, observations_directed
 from .edge_evidence import edge_evidence
 from .geometry import check_points, check_transform, invert, outer, transform_points
 from .grouping import best_per_key
@@ -159,6 +159,7 @@ class FrameContext:
     border_distance: tuple[np.ndarray, np.ndarray] | None = None
     left_gradients: Gradients | None = None   # the left image's (``expected``: does it show a segment's edge?)
     extracted_left: Segments2D | None = None  # the left pieces that gave this frame's 3D segments
+    shared: Segments | None = None    # the model's accepted segments seen from more than one aspect (``shared_directions``)
 
     def __post_init__(self):
         self.T_camera_object = check_transform(self.T_camera_object, "T_camera_object")
@@ -238,10 +239,14 @@ class LineSegmentType:
 
     def observe(self, observed: Segments, context: FrameContext) -> Segments:
         """Initialise the running sums of observations (already in the object frame; ``InputError``
-        if a centre is not finite)."""
+        if a centre is not finite); unsure ones first take the direction the model shares where their
+        view plane holds it (``context.shared``, ``dominant_directions.observations_directed``)."""
         check_points(observed.centers, "observed segment centres")
         p = self.params
         camera_in_object = invert(context.T_camera_object)[:3, 3]
+        if p.dominant is not None and p.dominant.observations and context.shared is not None and \
+                "sigma_direction_rad" in observed.extra:
+            observed = observations_directed(observed, camera_in_object, context.shared, p.dominant)
         to_camera = camera_in_object - observed.centers
         distance = np.linalg.norm(to_camera, axis=1, keepdims=True)
         ray = to_camera / np.maximum(distance, 1e-9)
@@ -573,6 +578,16 @@ def merged_twins(core, p: LineModelParams):
     return core.consolidated(*twin_candidates(core.entities, p), same)
 
 
+def shared_directions(entities: Segments, settled: np.ndarray, rules: LineModelParams) -> Segments:
+    """The ``settled`` (N,) bool segments (accepted, direction known) seen from more than one aspect
+    (stored views spanning more than ``rules.single_aspect_span_deg``): their directions, pinned by
+    distinct view planes, are the ones ``dominant_directions`` gives to others."""
+    k = np.flatnonzero(settled)
+    k = k[_view_span(entities.extra["views"][k]) > np.radians(rules.single_aspect_span_deg) + 1e-9]
+    return Segments(entities.frame_id, entities.centers[k], entities.directions[k], entities.lengths[k],
+                    np.ones(len(k)), np.ones(len(k), np.int64))
+
+
 def to_model(entities: Segments, confidence: np.ndarray, observations: np.ndarray,
              uncertainty: bool = True, rules: LineModelParams | None = None) -> Segments:
     """The model as written to files: segments with confidence and observation count, and
@@ -630,11 +645,12 @@ def to_model(entities: Segments, confidence: np.ndarray, observations: np.ndarra
     directions, sigma = entities.directions, 1.0 / np.sqrt(extra["inv_var_direction"])
     dominant = np.zeros(len(entities), bool)
     if rules is not None and rules.dominant is not None:
-        settled = confident & known     # and seen from more than one aspect (``dominant_directions``)
-        k = np.flatnonzero(settled)
-        settled[k] = _view_span(views[k]) > np.radians(rules.single_aspect_span_deg) + 1e-9
-        dominant, directions, sigma = dominant_directions(entities, mean_view, sigma, settled, confident & ~known,
-                                                          rules.dominant)
+        shared, held = shared_directions(entities, confident & known, rules), np.flatnonzero(confident & ~known)
+        taken, u, rms = dominant_directions(directions[held], mean_view[held], sigma[held], shared, rules.dominant)
+        taken &= ~covered(entities.select(held), u, shared, rules.dominant)
+        k = held[taken]
+        dominant[k], directions, sigma = True, directions.copy(), sigma.copy()
+        directions[k], sigma[k] = u[taken], np.maximum(rms[taken], np.radians(rules.dominant.min_sigma_deg))
         known = known | dominant
     held = ~known & confident
     confidence = np.where(known, confidence, np.minimum(confidence, UNSURE_CONFIDENCE))

@@ -14,7 +14,7 @@ from .errors import InputError
 from .extract import ExtractParams, FrameSegments, extract_frame
 from .geometry import inside_box, invert, mean_transform, pose_error, rotate_vectors, transform_points
 from .line_model import (FrameContext, LineModelParams, LineSegmentType, direction_known, merged_twins,
-                         planes_from_image, to_model)
+                         planes_from_image, shared_directions, to_model)
 from .lines2d import Gradients, Segments2D, StageTimes
 from .recording import StereoFrame
 from .segments import Segments
@@ -121,6 +121,7 @@ class LineAccumulation:
         self.core = Accumulator(self.entity_type, self.entity_type.empty(frame_id), params.rule)
         self.times = StageTimes()
         self.T_recorded_model: list[np.ndarray] = []   # T_recorded^-1 T_refined of the refined frames
+        self._shared: Segments | None = None    # the directions the model shares, as of the last frame
 
     def extract(self, frame: StereoFrame) -> FrameSegments:
         return extract_frame(frame, self.params.extract, self.camera_frame, self.times)
@@ -139,7 +140,7 @@ class LineAccumulation:
         elif self.params.motion == "tracked":
             T_camera_object, estimate = self._refined(frame, T_camera_object, extraction)
         context = FrameContext(T_camera_object, frame.intrinsics, frame.border_distance,
-                               *self._miss_test_inputs(frame, extraction))
+                               *self._miss_test_inputs(frame, extraction), shared=self._shared)
         segments = extraction.segments
         if self.params.box is not None:
             segments = segments.select(inside_box(transform_points(invert(T_camera_object), segments.centers),
@@ -156,6 +157,8 @@ class LineAccumulation:
             known[taken] = direction_known(core.entities.select(taken), rules)
         # accepted as the model is written (``to_model``: a segment's direction must be sure too)
         stats.accepted = int(np.sum((core.log_odds >= 0) & known))
+        if rules.dominant is not None and rules.dominant.observations:     # for the next frame's observations
+            self._shared = shared_directions(core.entities, (core.log_odds >= 0) & known, rules)
         log.debug("frame %d: %s", frame.index, ", ".join(f"{k} {v}" for k, v in stats.__dict__.items()))
         return AccumulationStep(frame, extraction, T_camera_object, stats, estimate,
                                 len(extraction.segments) - len(segments))

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from accumcli.dominant_directions import DominantParams, dominant_directions
+from accumcli.dominant_directions import DominantParams, covered, dominant_directions
 from accumcli.line_model import FrameContext, LineModelParams, LineSegmentType, to_model
 from accumcli.segments import Segments
 from tests.test_accumulate import INTR, _tilted_towards_camera
@@ -33,20 +33,24 @@ def _box_edges(y_directions=4, offset_deg=0.0):
     return np.array(centers), np.array(directions)
 
 
-def _model(held_sigma_deg=10.0, tilt_deg=12.0, extra_centers=(), extra_directions=(), **box):
-    """Segments (the held one first, at the origin: y tilted ``tilt_deg`` towards the camera, within its
-    view plane), view directions (N, 3), direction sigmas (N,) rad, settled (N,) bool, held (N,) bool."""
+def _case(held_sigma_deg=10.0, tilt_deg=12.0, extra_centers=(), extra_directions=(), **box):
+    """A held segment at the origin (y tilted ``tilt_deg`` towards the camera, within its view plane),
+    its view direction (1, 3), its sigma (1,) rad, and the shared segments (the box's and the extra ones)."""
     centers, directions = _box_edges(**box)
-    centers = np.vstack([np.zeros((1, 3)), centers, np.reshape(extra_centers, (-1, 3))])
-    tilted = np.cos(np.radians(tilt_deg)) * Y + np.sin(np.radians(tilt_deg)) * TOWARDS_CAMERA
-    directions = np.vstack([tilted, directions, np.reshape(extra_directions, (-1, 3))])
+    centers = np.vstack([centers, np.reshape(extra_centers, (-1, 3))])
+    directions = np.vstack([directions, np.reshape(extra_directions, (-1, 3))])
     n = len(centers)
-    segments = Segments("gripper", centers, directions, np.full(n, 0.02), np.full(n, 0.9), np.full(n, 5, np.int64), {})
-    sigma = np.full(n, np.radians(0.5))
-    sigma[0] = np.radians(held_sigma_deg)
-    held = np.zeros(n, bool)
-    held[0] = True
-    return segments, np.tile(TOWARDS_CAMERA, (n, 1)), sigma, ~held, held
+    shared = Segments("gripper", centers, directions, np.full(n, 0.02), np.ones(n), np.ones(n, np.int64))
+    tilted = np.cos(np.radians(tilt_deg)) * Y + np.sin(np.radians(tilt_deg)) * TOWARDS_CAMERA
+    held = Segments("gripper", np.zeros((1, 3)), tilted[None], np.array([0.02]), np.ones(1), np.ones(1, np.int64))
+    return held, TOWARDS_CAMERA[None], np.radians([held_sigma_deg]), shared
+
+
+def _taken(case, p=DominantParams()):
+    """(taken (1,) bool as ``to_model`` decides, directions (1, 3), their sigma (1,))."""
+    held, view, sigma, shared = case
+    taken, directions, rms = dominant_directions(held.directions, view, sigma, shared, p)
+    return taken & ~covered(held, directions, shared, p), directions, rms
 
 
 def _angle_deg(a, b) -> float:
@@ -55,32 +59,49 @@ def _angle_deg(a, b) -> float:
 
 def test_a_held_segment_takes_the_dominant_direction_its_view_plane_holds():
     """Tilted 12 degrees in depth and unsure by 10: it takes the y edges' mean direction (within a degree
-    of y), a sigma from their scatter, and nothing else changes."""
-    segments, view, sigma, settled, held = _model()
-    taken, directions, new_sigma = dominant_directions(segments, view, sigma, settled, held)
-    assert taken.tolist() == [True] + [False] * (len(segments) - 1)
-    assert _angle_deg(directions[0], Y) < 1.0 and np.dot(directions[0], segments.directions[0]) > 0
-    assert np.radians(0.5) <= new_sigma[0] < np.radians(2.0)
-    assert np.array_equal(directions[1:], segments.directions[1:]) and np.array_equal(new_sigma[1:], sigma[1:])
+    of y, its sign kept) and a sigma from their scatter."""
+    case = _case()
+    taken, directions, rms = _taken(case)
+    assert taken[0] and _angle_deg(directions[0], Y) < 1.0 and np.dot(directions[0], case[0].directions[0]) > 0
+    assert 0.0 < rms[0] < np.radians(2.0)
 
 
 def test_what_the_dominant_directions_do_not_decide():
     """Not taken: a turn beyond 2 sigmas (a segment sure to 3 degrees, turned by 12), a direction shared by
     one accepted segment only, a plane holding two directions alike (y and y turned 16 degrees within
     it), a stretch an accepted parallel segment 5 mm away already covers, a direction 30 degrees off
-    every accepted one. With no settled segment at all nothing is taken either."""
+    every accepted one; nor with fewer shared segments than ``min_segments``."""
     cases = [dict(held_sigma_deg=3.0), dict(y_directions=1), dict(tilt_deg=30.0),
-             dict(extra_centers=[0.005, 0.0, 0.0], extra_directions=Y)]
+             dict(extra_centers=[0.005, 0.0, 0.0], extra_directions=Y),
+             dict(extra_centers=np.tile([0.06, 0.03, 0.0], (4, 1)) + np.arange(4)[:, None] * [0.0, 0.0, 0.01],
+                  extra_directions=np.tile(_turned(Y, [1, 0, 0], -16.0), (4, 1)))]
     for case in cases:
-        segments, view, sigma, settled, held = _model(**case)
-        assert not dominant_directions(segments, view, sigma, settled, held)[0].any(), case
-    segments, view, sigma, settled, held = _model()
-    split = _model(extra_centers=np.tile([0.06, 0.03, 0.0], (4, 1)) + np.arange(4)[:, None] * [0.0, 0.0, 0.01],
-                   extra_directions=np.tile(_turned(Y, [1, 0, 0], -16.0), (4, 1)))
-    assert _angle_deg(split[0].directions[-1], split[0].directions[0]) < 20.0          # a candidate too
-    assert not dominant_directions(*split)[0].any()
-    assert not dominant_directions(segments, view, sigma, np.zeros(len(segments), bool), held)[0].any()
-    assert dominant_directions(segments, view, sigma, settled, held, DominantParams(share=0.9))[0][0]
+        assert not _taken(_case(**case))[0].any(), case
+    held, view, sigma, shared = _case()
+    assert not _taken((held, view, sigma, shared.select(np.array([4]))))[0].any()
+    assert _taken(_case(), DominantParams(share=0.9))[0][0]      # one direction: all of the candidates' length
+
+
+def test_unsure_observations_take_the_dominant_direction_in_the_running_accumulation():
+    """``observations_directed``: of three observations beside the box, the one tilted 12 degrees and
+    unsure (10) takes y with a sigma of at least ``observation_sigma_deg``; one sure to 1 degree (under
+    ``unsure_deg``) and one 30 degrees off are left as they were."""
+    from accumcli.dominant_directions import observations_directed
+
+    _, _, _, shared = _case()
+    tilted = np.cos(np.radians(12.0)) * Y + np.sin(np.radians(12.0)) * TOWARDS_CAMERA
+    far = np.cos(np.radians(30.0)) * Y + np.sin(np.radians(30.0)) * TOWARDS_CAMERA
+    observed = Segments("gripper", np.zeros((3, 3)), np.array([tilted, tilted, far]), np.full(3, 0.02), np.ones(3),
+                        np.ones(3, np.int64), {"sigma_direction_rad": np.radians([10.0, 1.0, 10.0])})
+    out = observations_directed(observed, np.array([0.0, 0.0, -0.5]), shared, DominantParams())
+    assert _angle_deg(out.directions[0], Y) < 1.0 and np.isclose(out.extra["sigma_direction_rad"][0], np.radians(4.0))
+    assert np.array_equal(out.directions[1:], observed.directions[1:])
+    assert np.array_equal(out.extra["sigma_direction_rad"][1:], observed.extra["sigma_direction_rad"][1:])
+    assert np.array_equal(observed.directions[0], tilted)          # the input is left as it was
+    T, _ = _tilted_towards_camera(0.0, 12.0)                         # the same camera, as the accumulation sees it
+    for params, expected in ((LineModelParams(), 0.0), (LineModelParams(dominant=DominantParams(observations=False)), 12.0)):
+        entity = LineSegmentType(params).observe(observed, FrameContext(T, INTR, shared=shared))
+        assert abs(_angle_deg(entity.directions[0], Y) - expected) < 1.0
 
 
 def test_the_written_model_accepts_a_held_segment_by_the_dominant_direction_unless_told_not_to():
