@@ -390,8 +390,9 @@ def extract(recording, output, rrd, with_2d, workers, frames, extract_params, op
 @click.option("--dominant-directions/--own-directions", default=True, show_default=True,
               help="A segment confirmed but unsure of its direction, and each frame's 3D segment unsure of its own, "
                    "take the direction that the model's accepted segments share, where their view plane holds that "
-                   "one and their own direction lies near it (the edges of made objects share a few directions); "
-                   "--own-directions keeps their own.")
+                   "one and their own direction lies near it (the edges of made objects share a few directions; "
+                   "the running accumulation's counts, as --history writes them, do not count the held ones it "
+                   "accepts); --own-directions keeps their own.")
 @box_option
 @frame_workers_option
 @frames_option

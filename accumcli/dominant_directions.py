@@ -21,10 +21,13 @@ The rule (``DominantParams``), at writing time (``line_model.to_model``), on the
 - the direction is their length-weighted mean, projected into the held segment's plane; it turns
   the segment's own by at most ``turn_sigmas`` of its direction sigma (a segment that claims 2
   degrees and would turn by 15 is something else: a texture line, a piece of another edge);
-- not where an accepted segment within ``covered_m`` across already covers that stretch in that
-  direction (within 10 degrees, overlapping along it): there a held segment adds no edge, only the
-  risk of a wrong one (most of the held segments off every edge by 4 to 9 mm lay beside an accepted
-  segment of that kind).
+- not where one of those accepted segments within ``covered_m`` across already covers that stretch
+  in that direction (within ``covered_deg``, overlapping along it): there a held segment adds no
+  edge, only the risk of a wrong one (most of the held segments off every edge by 4 to 9 mm lay
+  beside an accepted segment of that kind);
+- not a segment within ``min_plane_sine`` of its viewing ray (its plane is as unsure as its line, as
+  ``line_model``'s planes), nor, with ``--plane-agreement``, one held back because its planes do not
+  meet on one line (they disagree: no plane to hold a direction).
 
 Such a segment is accepted (``direction_dominant`` in the model file), its direction sigma the
 length-weighted root-mean-square angle of the cluster's members to their mean (at least
@@ -77,6 +80,7 @@ import numpy as np
 import scipy.sparse
 from scipy.spatial import cKDTree
 
+from .metric import d_o
 from .segments import Segments
 
 
@@ -88,7 +92,9 @@ class DominantParams:
     share: float = 0.6               # the dominant one holds this share of the candidates' length ...
     min_segments: int = 2            # ... from this many accepted segments
     turn_sigmas: float = 2.0         # the direction turns by at most this many of its sigmas
-    covered_m: float = 0.010         # a held segment not where an accepted one this near across covers the stretch
+    covered_m: float = 0.010         # a held segment not where a shared one this near across ...
+    covered_deg: float = 10.0        # ... and this near in direction covers the stretch
+    min_plane_sine: float = 0.2      # a segment this near its viewing ray (sin) has no plane to hold a direction
     min_sigma_deg: float = 0.5       # a held segment's taken direction's sigma at least this
     observations: bool = True        # the running accumulation's unsure observations too ...
     unsure_deg: float = 2.0          # ... those whose stereo direction sigma exceeds this ...
@@ -96,6 +102,7 @@ class DominantParams:
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
+    """Rows of ``v`` at unit length; zero rows stay zero (``geometry.unit`` would give NaN)."""
     return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
 
 
@@ -121,7 +128,8 @@ def dominant_directions(directions: np.ndarray, view_direction: np.ndarray, sigm
     if len(directions) == 0 or len(shared) < p.min_segments:
         return taken, out, rms
     u_h, u_a, length = out, shared.directions, shared.lengths
-    normal = _unit(np.cross(view_direction, u_h))                         # (H, 3) the view planes
+    cross = np.cross(view_direction, u_h)
+    normal = _unit(cross)                                                 # (H, 3) the view planes
     candidate = (np.abs(normal @ u_a.T) <= np.sin(np.radians(p.plane_deg))) & (
         np.abs(u_h @ u_a.T) >= np.cos(np.radians(p.max_turn_deg)))        # (H, A)
     near = _near_directions(u_a, p.cluster_deg)
@@ -130,25 +138,26 @@ def dominant_directions(directions: np.ndarray, view_direction: np.ndarray, sigm
     best = np.argmax(support, axis=1)
     members = candidate & np.asarray(near[best].todense(), bool)
     ok = (support[np.arange(len(u_h)), best] >= p.share * weight.sum(axis=1)) & (
-        members.sum(axis=1) >= p.min_segments) & candidate.any(axis=1)
+        members.sum(axis=1) >= p.min_segments) & candidate.any(axis=1) & (
+        np.linalg.norm(cross, axis=1) >= p.min_plane_sine)
     mean = _unit((members * length * np.where(u_h @ u_a.T >= 0, 1.0, -1.0)) @ u_a)
     mean = _unit(mean - np.sum(mean * normal, axis=1, keepdims=True) * normal)     # into the plane
-    ok &= np.arccos(np.clip(np.abs(np.sum(mean * u_h, axis=1)), 0.0, 1.0)) <= p.turn_sigmas * sigma_direction
-    spread = np.arccos(np.clip(np.abs(mean @ u_a.T), 0.0, 1.0))
+    ok &= d_o(mean, u_h) <= p.turn_sigmas * sigma_direction
+    spread = d_o(mean[:, None, :], u_a[None, :, :])                       # (H, A)
     weight = members * length
     rms = np.sqrt(np.sum(weight * spread ** 2, axis=1) / np.maximum(np.sum(weight, axis=1), 1e-12))
-    out[ok] = mean[ok] * np.where(np.sum(mean[ok] * u_h[ok], axis=1) >= 0, 1.0, -1.0)[:, None]
+    out[ok] = mean[ok] * np.where(np.sum(mean[ok] * u_h[ok], axis=1) >= 0, 1.0, -1.0)[:, None]   # sign kept
     return ok, out, rms
 
 
 def covered(segments: Segments, directions: np.ndarray, shared: Segments, p: DominantParams) -> np.ndarray:
     """(H,) bool: a segment of ``shared`` overlaps each of ``segments`` (object frame) along its line,
-    lies within ``covered_m`` across it and within 10 degrees of the direction (H, 3) it would take."""
+    lies within ``covered_m`` across it and within ``covered_deg`` of the direction (H, 3) it would take."""
     rel = segments.centers[:, None, :] - shared.centers[None, :, :]       # (H, A, 3)
     along = np.einsum("haj,aj->ha", rel, shared.directions)
     across = np.linalg.norm(rel - along[:, :, None] * shared.directions[None], axis=2)
     overlap = np.abs(along) <= (shared.lengths[None, :] + segments.lengths[:, None]) / 2
-    parallel = np.abs(directions @ shared.directions.T) >= np.cos(np.radians(10.0))
+    parallel = np.abs(directions @ shared.directions.T) >= np.cos(np.radians(p.covered_deg))
     return np.any((across <= p.covered_m) & overlap & parallel, axis=1)
 
 

@@ -478,9 +478,13 @@ def direction_known(entities: Segments, rules: LineModelParams | None) -> np.nda
         known[k] = _planes_figures(entities.extra["dir_info"][k], rules)[0] <= rules.plane_agreement
     if rules.single_aspect_sigma_deg is not None:
         undecided = np.flatnonzero(known & (inverse_variance < np.radians(rules.single_aspect_sigma_deg) ** -2.0))
-        known[undecided] = (_view_span(entities.extra["views"][undecided])
-                            > np.radians(rules.single_aspect_span_deg) + 1e-9)
+        known[undecided] = _more_than_one_aspect(entities.extra["views"][undecided], rules)
     return known
+
+
+def _more_than_one_aspect(views: np.ndarray, rules: LineModelParams) -> np.ndarray:
+    """(N,) bool: view sets (N, K, 3) spanning more than ``rules.single_aspect_span_deg``."""
+    return _view_span(views) > np.radians(rules.single_aspect_span_deg) + 1e-9
 
 
 def twin_candidates(model: Segments, p: LineModelParams) -> tuple[np.ndarray, np.ndarray]:
@@ -583,7 +587,7 @@ def shared_directions(entities: Segments, settled: np.ndarray, rules: LineModelP
     (stored views spanning more than ``rules.single_aspect_span_deg``): their directions, pinned by
     distinct view planes, are the ones ``dominant_directions`` gives to others."""
     k = np.flatnonzero(settled)
-    k = k[_view_span(entities.extra["views"][k]) > np.radians(rules.single_aspect_span_deg) + 1e-9]
+    k = k[_more_than_one_aspect(entities.extra["views"][k], rules)]
     return Segments(entities.frame_id, entities.centers[k], entities.directions[k], entities.lengths[k],
                     np.ones(len(k)), np.ones(len(k), np.int64))
 
@@ -646,11 +650,14 @@ def to_model(entities: Segments, confidence: np.ndarray, observations: np.ndarra
     dominant = np.zeros(len(entities), bool)
     if rules is not None and rules.dominant is not None:
         shared, held = shared_directions(entities, confident & known, rules), np.flatnonzero(confident & ~known)
+        if rules.plane_agreement is not None:     # not those whose planes disagree (no plane to hold a direction)
+            held = held[~direction_known(entities.select(held), replace(rules, plane_agreement=None))]
         taken, u, rms = dominant_directions(directions[held], mean_view[held], sigma[held], shared, rules.dominant)
-        taken &= ~covered(entities.select(held), u, shared, rules.dominant)
-        k = held[taken]
+        u, rms, k = u[taken], rms[taken], held[taken]
+        free = ~covered(entities.select(k), u, shared, rules.dominant)
+        k = k[free]
         dominant[k], directions, sigma = True, directions.copy(), sigma.copy()
-        directions[k], sigma[k] = u[taken], np.maximum(rms[taken], np.radians(rules.dominant.min_sigma_deg))
+        directions[k], sigma[k] = u[free], np.maximum(rms[free], np.radians(rules.dominant.min_sigma_deg))
         known = known | dominant
     held = ~known & confident
     confidence = np.where(known, confidence, np.minimum(confidence, UNSURE_CONFIDENCE))

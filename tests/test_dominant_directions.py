@@ -59,24 +59,37 @@ def _angle_deg(a, b) -> float:
 
 def test_a_held_segment_takes_the_dominant_direction_its_view_plane_holds():
     """Tilted 12 degrees in depth and unsure by 10: it takes the y edges' mean direction (within a degree
-    of y, its sign kept) and a sigma from their scatter."""
-    case = _case()
-    taken, directions, rms = _taken(case)
-    assert taken[0] and _angle_deg(directions[0], Y) < 1.0 and np.dot(directions[0], case[0].directions[0]) > 0
-    assert 0.0 < rms[0] < np.radians(2.0)
+    of y, its sign kept, in its own view plane) and a sigma from their scatter, whichever sign the
+    shared segments' directions carry."""
+    for flipped in (False, True):
+        held, view, sigma, shared = _case()
+        if flipped:
+            shared.directions[4:6] *= -1.0         # two of the four along y
+        taken, directions, rms = _taken((held, view, sigma, shared))
+        assert taken[0] and _angle_deg(directions[0], Y) < 1.0 and np.dot(directions[0], held.directions[0]) > 0
+        assert abs(np.dot(directions[0], np.cross(view[0], held.directions[0]))) < 1e-9
+        assert 0.0 < rms[0] < np.radians(2.0)
 
 
 def test_what_the_dominant_directions_do_not_decide():
     """Not taken: a turn beyond 2 sigmas (a segment sure to 3 degrees, turned by 12), a direction shared by
-    one accepted segment only, a plane holding two directions alike (y and y turned 16 degrees within
-    it), a stretch an accepted parallel segment 5 mm away already covers, a direction 30 degrees off
-    every accepted one; nor with fewer shared segments than ``min_segments``."""
+    one accepted segment only, a direction 30 degrees off every accepted one, a stretch an accepted
+    parallel segment 5 mm away already covers, a plane holding two directions alike (y and y turned 16
+    degrees within it), a shared direction 8 degrees out of the plane, a segment 10 degrees off its
+    viewing ray (its plane unsure); nor with fewer shared segments than ``min_segments``. Taken: beside a
+    parallel segment 5 mm across but past its end, or one 5 mm away crossing at 90 degrees."""
+    four = np.tile([0.06, 0.03, 0.0], (4, 1)) + np.arange(4)[:, None] * [0.0, 0.0, 0.01]
     cases = [dict(held_sigma_deg=3.0), dict(y_directions=1), dict(tilt_deg=30.0),
              dict(extra_centers=[0.005, 0.0, 0.0], extra_directions=Y),
-             dict(extra_centers=np.tile([0.06, 0.03, 0.0], (4, 1)) + np.arange(4)[:, None] * [0.0, 0.0, 0.01],
-                  extra_directions=np.tile(_turned(Y, [1, 0, 0], -16.0), (4, 1)))]
+             dict(extra_centers=four, extra_directions=np.tile(_turned(Y, [1, 0, 0], -16.0), (4, 1))),
+             dict(y_directions=0, extra_centers=four, extra_directions=np.tile(_turned(Y, [0, 0, 1], 8.0), (4, 1))),
+             dict(tilt_deg=80.0)]          # 10 degrees off the ray; the box's z edges lie in its plane, 10 off it
     for case in cases:
         assert not _taken(_case(**case))[0].any(), case
+    assert _taken(_case(tilt_deg=80.0), DominantParams(min_plane_sine=0.0))[0][0]   # the plane's test decides
+    for beside in (dict(extra_centers=[0.0, 0.06, 0.005], extra_directions=Y),
+                   dict(extra_centers=[0.005, 0.0, 0.0], extra_directions=[1.0, 0.0, 0.0])):
+        assert _taken(_case(**beside))[0][0], beside
     held, view, sigma, shared = _case()
     assert not _taken((held, view, sigma, shared.select(np.array([4]))))[0].any()
     assert _taken(_case(), DominantParams(share=0.9))[0][0]      # one direction: all of the candidates' length
