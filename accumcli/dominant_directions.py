@@ -77,8 +77,6 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-import scipy.sparse
-from scipy.spatial import cKDTree
 
 from .metric import d_o
 from .segments import Segments
@@ -106,14 +104,6 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
 
 
-def _near_directions(u: np.ndarray, angle_deg: float) -> scipy.sparse.csr_matrix:
-    """(A, A) sparse 0/1: unit directions ``u`` (A, 3) within ``angle_deg`` of each other, sign aside."""
-    chord = 2.0 * np.sin(np.radians(angle_deg) / 2.0)
-    pairs = cKDTree(u).sparse_distance_matrix(cKDTree(np.concatenate([u, -u])), chord, output_type="ndarray")
-    i, j = pairs["i"], pairs["j"] % len(u)
-    return scipy.sparse.csr_matrix((np.ones(len(i)), (i, j)), shape=(len(u), len(u)))
-
-
 def dominant_directions(directions: np.ndarray, view_direction: np.ndarray, sigma_direction: np.ndarray,
                         shared: Segments, p: DominantParams = DominantParams()):
     """The dominant directions of ``shared`` (the accepted segments seen from more than one aspect,
@@ -122,32 +112,42 @@ def dominant_directions(directions: np.ndarray, view_direction: np.ndarray, sigm
     Object frame; ``view_direction`` (H, 3) unit, from each segment to the camera (its mean);
     ``sigma_direction`` (H,) rad. Returns (taken (H,) bool, directions (H, 3) unit with the taken
     rows replaced, sign kept, the taken directions' sigma (H,) rad: the members' root-mean-square
-    angle to their mean, meaningful where taken)."""
+    angle to their mean, meaningful where taken). Clusters are formed among the candidates of the
+    segments that have any (K of them), dense (K, K): per frame of the running accumulation most
+    observations have none, and a KD-tree over every shared direction cost more."""
     taken, out = np.zeros(len(directions), bool), np.array(directions, float)
     rms = np.zeros(len(directions))
     if len(directions) == 0 or len(shared) < p.min_segments:
         return taken, out, rms
-    u_h, u_a, length = out, shared.directions, shared.lengths
-    cross = np.cross(view_direction, u_h)
-    normal = _unit(cross)                                                 # (H, 3) the view planes
-    candidate = (np.abs(normal @ u_a.T) <= np.sin(np.radians(p.plane_deg))) & (
-        np.abs(u_h @ u_a.T) >= np.cos(np.radians(p.max_turn_deg)))        # (H, A)
-    near = _near_directions(u_a, p.cluster_deg)
+    cross = np.cross(view_direction, out)
+    sine = np.linalg.norm(cross, axis=1)
+    normal = cross / np.maximum(sine, 1e-12)[:, None]                     # (H, 3) the view planes
+    candidate = (np.abs(normal @ shared.directions.T) <= np.sin(np.radians(p.plane_deg))) & (
+        np.abs(out @ shared.directions.T) >= np.cos(np.radians(p.max_turn_deg))) & (
+        sine >= p.min_plane_sine)[:, None]                                 # (H, A)
+    rows = np.flatnonzero(candidate.any(axis=1))
+    if len(rows) == 0:
+        return taken, out, rms
+    cols = np.flatnonzero(candidate[rows].any(axis=0))
+    candidate, u_a, length = candidate[np.ix_(rows, cols)], shared.directions[cols], shared.lengths[cols]
+    u_h, normal = out[rows], normal[rows]
+    near = np.abs(u_a @ u_a.T) >= np.cos(np.radians(p.cluster_deg))      # (K, K), symmetric
     weight = candidate * length
-    support = np.where(candidate, np.asarray((near @ weight.T).T), -1.0)  # near is symmetric
+    support = np.where(candidate, weight @ near, -1.0)
     best = np.argmax(support, axis=1)
-    members = candidate & np.asarray(near[best].todense(), bool)
-    ok = (support[np.arange(len(u_h)), best] >= p.share * weight.sum(axis=1)) & (
-        members.sum(axis=1) >= p.min_segments) & candidate.any(axis=1) & (
-        np.linalg.norm(cross, axis=1) >= p.min_plane_sine)
+    members = candidate & near[best]
+    ok = (support[np.arange(len(rows)), best] >= p.share * weight.sum(axis=1)) & (
+        members.sum(axis=1) >= p.min_segments)
     mean = _unit((members * length * np.where(u_h @ u_a.T >= 0, 1.0, -1.0)) @ u_a)
     mean = _unit(mean - np.sum(mean * normal, axis=1, keepdims=True) * normal)     # into the plane
-    ok &= d_o(mean, u_h) <= p.turn_sigmas * sigma_direction
-    spread = d_o(mean[:, None, :], u_a[None, :, :])                       # (H, A)
+    ok &= d_o(mean, u_h) <= p.turn_sigmas * sigma_direction[rows]
+    spread = np.arccos(np.clip(np.abs(mean @ u_a.T), 0.0, 1.0))            # (R, K)
     weight = members * length
-    rms = np.sqrt(np.sum(weight * spread ** 2, axis=1) / np.maximum(np.sum(weight, axis=1), 1e-12))
-    out[ok] = mean[ok] * np.where(np.sum(mean[ok] * u_h[ok], axis=1) >= 0, 1.0, -1.0)[:, None]   # sign kept
-    return ok, out, rms
+    rms[rows] = np.sqrt(np.sum(weight * spread ** 2, axis=1) / np.maximum(np.sum(weight, axis=1), 1e-12))
+    k = rows[ok]
+    taken[k] = True
+    out[k] = mean[ok] * np.where(np.sum(mean[ok] * u_h[ok], axis=1) >= 0, 1.0, -1.0)[:, None]   # sign kept
+    return taken, out, rms
 
 
 def covered(segments: Segments, directions: np.ndarray, shared: Segments, p: DominantParams) -> np.ndarray:
