@@ -78,6 +78,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .geometry import unit_or_zero
 from .metric import d_o
 from .segments import Segments
 
@@ -97,11 +98,6 @@ class DominantParams:
     observations: bool = True        # the running accumulation's unsure observations too ...
     unsure_deg: float = 2.0          # ... those whose stereo direction sigma exceeds this ...
     observation_sigma_deg: float = 4.0   # ... their taken direction's sigma at least this
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    """Rows of ``v`` at unit length; zero rows stay zero (``geometry.unit`` would give NaN)."""
-    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
 
 
 def dominant_directions(directions: np.ndarray, view_direction: np.ndarray, sigma_direction: np.ndarray,
@@ -138,8 +134,8 @@ def dominant_directions(directions: np.ndarray, view_direction: np.ndarray, sigm
     members = candidate & near[best]
     ok = (support[np.arange(len(rows)), best] >= p.share * weight.sum(axis=1)) & (
         members.sum(axis=1) >= p.min_segments)
-    mean = _unit((members * length * np.where(u_h @ u_a.T >= 0, 1.0, -1.0)) @ u_a)
-    mean = _unit(mean - np.sum(mean * normal, axis=1, keepdims=True) * normal)     # into the plane
+    mean = unit_or_zero((members * length * np.where(u_h @ u_a.T >= 0, 1.0, -1.0)) @ u_a)
+    mean = unit_or_zero(mean - np.sum(mean * normal, axis=1, keepdims=True) * normal)     # into the plane
     ok &= d_o(mean, u_h) <= p.turn_sigmas * sigma_direction[rows]
     spread = np.arccos(np.clip(np.abs(mean @ u_a.T), 0.0, 1.0))            # (R, K)
     weight = members * length
@@ -150,26 +146,27 @@ def dominant_directions(directions: np.ndarray, view_direction: np.ndarray, sigm
     return taken, out, rms
 
 
-def covered(segments: Segments, directions: np.ndarray, shared: Segments, p: DominantParams) -> np.ndarray:
-    """(H,) bool: a segment of ``shared`` overlaps each of ``segments`` (object frame) along its line,
-    lies within ``covered_m`` across it and within ``covered_deg`` of the direction (H, 3) it would take."""
-    rel = segments.centers[:, None, :] - shared.centers[None, :, :]       # (H, A, 3)
+def covered(centers: np.ndarray, lengths: np.ndarray, directions: np.ndarray, shared: Segments,
+            p: DominantParams) -> np.ndarray:
+    """(H,) bool: a segment of ``shared`` overlaps each segment (``centers`` (H, 3) m, object frame,
+    ``lengths`` (H,) m) along its line, lies within ``covered_m`` across it and within ``covered_deg``
+    of the direction (H, 3) it would take."""
+    rel = centers[:, None, :] - shared.centers[None, :, :]                # (H, A, 3)
     along = np.einsum("haj,aj->ha", rel, shared.directions)
     across = np.linalg.norm(rel - along[:, :, None] * shared.directions[None], axis=2)
-    overlap = np.abs(along) <= (shared.lengths[None, :] + segments.lengths[:, None]) / 2
+    overlap = np.abs(along) <= (shared.lengths[None, :] + lengths[:, None]) / 2
     parallel = np.abs(directions @ shared.directions.T) >= np.cos(np.radians(p.covered_deg))
     return np.any((across <= p.covered_m) & overlap & parallel, axis=1)
 
 
-def observations_directed(observed: Segments, camera: np.ndarray, shared: Segments, p: DominantParams) -> Segments:
+def observations_directed(observed: Segments, ray: np.ndarray, shared: Segments, p: DominantParams) -> Segments:
     """``observed`` (object frame, with ``sigma_direction_rad``) with the observations less sure than
-    ``unsure_deg`` given the dominant direction their view plane holds (``dominant_directions``; the
-    camera at ``camera`` (3,), object frame, metres) and that direction's sigma, at least
+    ``unsure_deg`` given the dominant direction their view plane holds (``dominant_directions``; ``ray``
+    (N, 3) unit, from each observation to the camera) and that direction's sigma, at least
     ``observation_sigma_deg``; the rest as they are."""
     sigma = observed.extra["sigma_direction_rad"]
     unsure = np.flatnonzero(sigma > np.radians(p.unsure_deg))
-    view = _unit(camera - observed.centers[unsure])
-    taken, directions, rms = dominant_directions(observed.directions[unsure], view, sigma[unsure], shared, p)
+    taken, directions, rms = dominant_directions(observed.directions[unsure], ray[unsure], sigma[unsure], shared, p)
     if not taken.any():
         return observed
     k = unsure[taken]

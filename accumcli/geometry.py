@@ -152,6 +152,11 @@ def unit(vectors: np.ndarray) -> np.ndarray:
     return vectors / np.linalg.norm(vectors, axis=-1, keepdims=True)
 
 
+def unit_or_zero(vectors: np.ndarray) -> np.ndarray:
+    """Rows of ``vectors: (..., 3)`` scaled to unit length; zero rows stay zero (``unit`` gives NaN)."""
+    return vectors / np.maximum(np.linalg.norm(vectors, axis=-1, keepdims=True), 1e-12)
+
+
 def outer(vectors: np.ndarray) -> np.ndarray:
     """(N, 3, 3) outer products v v^T of the rows of ``vectors: (N, 3)``."""
     return vectors[:, :, None] * vectors[:, None, :]

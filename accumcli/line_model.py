@@ -95,7 +95,7 @@ from scipy.spatial import cKDTree
 
 from .dominant_directions import DominantParams, covered, dominant_directions, observations_directed
 from .edge_evidence import edge_evidence
-from .geometry import check_points, check_transform, invert, outer, transform_points
+from .geometry import check_points, check_transform, invert, outer, transform_points, unit_or_zero
 from .grouping import best_per_key
 from .lines2d import Gradients, Segments2D
 from .metric import MetricThresholds, candidate_pairs, d_o, d_p, pair_costs
@@ -244,12 +244,12 @@ class LineSegmentType:
         check_points(observed.centers, "observed segment centres")
         p = self.params
         camera_in_object = invert(context.T_camera_object)[:3, 3]
-        if p.dominant is not None and p.dominant.observations and context.shared is not None and \
-                "sigma_direction_rad" in observed.extra:
-            observed = observations_directed(observed, camera_in_object, context.shared, p.dominant)
         to_camera = camera_in_object - observed.centers
         distance = np.linalg.norm(to_camera, axis=1, keepdims=True)
         ray = to_camera / np.maximum(distance, 1e-9)
+        if p.dominant is not None and p.dominant.observations and context.shared is not None and \
+                "sigma_direction_rad" in observed.extra:
+            observed = observations_directed(observed, ray, context.shared, p.dominant)
         depth = distance[:, 0]
         sigma_lat = depth * p.lateral_sigma_px / context.intrinsics.fx
         sigma_depth = observed.extra.get("sigma_depth_m", sigma_lat * 10)
@@ -325,7 +325,7 @@ class LineSegmentType:
             extra["dir_info"][mi] += o["dir_info"][oi]    # u u^T and n n^T: the sign of u does not matter
             u = _direction_of_planes(extra, model.directions, mi, self.params)
         else:
-            u = _unit(extra["dir_sum"][mi])
+            u = unit_or_zero(extra["dir_sum"][mi])
         directions[mi] = u
         # extent along the line: the union of the model's and the observation's, at most max_extent lengths
         rel = observed.centers[oi] - model.centers[mi]
@@ -426,12 +426,8 @@ def _add_view(views: np.ndarray, new: np.ndarray, step: float) -> np.ndarray:
     return views
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
-
-
 def _angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.arccos(np.clip(np.sum(_unit(a) * _unit(b), axis=-1), -1.0, 1.0))
+    return np.arccos(np.clip(np.sum(unit_or_zero(a) * unit_or_zero(b), axis=-1), -1.0, 1.0))
 
 
 def _view_span(views: np.ndarray) -> np.ndarray:
@@ -592,6 +588,26 @@ def shared_directions(entities: Segments, settled: np.ndarray, rules: LineModelP
                     np.ones(len(k)), np.ones(len(k), np.int64))
 
 
+def _held_directed(entities: Segments, mean_view: np.ndarray, sigma: np.ndarray, confident: np.ndarray,
+                   known: np.ndarray, rules: LineModelParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(taken (N,) bool, directions (N, 3), direction sigmas (N,) rad) of model segments (object frame)
+    whose ``confident`` but not ``known`` direction takes the one the settled segments share
+    (``dominant_directions``, not where a shared segment covers it); ``mean_view`` (N, 3) unit, towards
+    the camera; ``sigma`` (N,) rad, the segments' own. Not those held back by ``plane_agreement``: their
+    planes disagree, so there is no plane to hold a direction."""
+    p = rules.dominant
+    shared, held = shared_directions(entities, confident & known, rules), np.flatnonzero(confident & ~known)
+    if rules.plane_agreement is not None:
+        held = held[~direction_known(entities.select(held), replace(rules, plane_agreement=None))]
+    taken, u, rms = dominant_directions(entities.directions[held], mean_view[held], sigma[held], shared, p)
+    k, u, rms = held[taken], u[taken], rms[taken]
+    free = ~covered(entities.centers[k], entities.lengths[k], u, shared, p)
+    k = k[free]
+    dominant, directions, sigma = np.zeros(len(entities), bool), entities.directions.copy(), sigma.copy()
+    dominant[k], directions[k], sigma[k] = True, u[free], np.maximum(rms[free], np.radians(p.min_sigma_deg))
+    return dominant, directions, sigma
+
+
 def to_model(entities: Segments, confidence: np.ndarray, observations: np.ndarray,
              uncertainty: bool = True, rules: LineModelParams | None = None) -> Segments:
     """The model as written to files: segments with confidence and observation count, and
@@ -645,19 +661,11 @@ def to_model(entities: Segments, confidence: np.ndarray, observations: np.ndarra
     known = direction_known(entities, rules)
     confident = np.asarray(confidence) >= 0.5
     views = extra["views"]
-    mean_view = _unit(views.sum(axis=1))
+    mean_view = unit_or_zero(views.sum(axis=1))
     directions, sigma = entities.directions, 1.0 / np.sqrt(extra["inv_var_direction"])
     dominant = np.zeros(len(entities), bool)
     if rules is not None and rules.dominant is not None:
-        shared, held = shared_directions(entities, confident & known, rules), np.flatnonzero(confident & ~known)
-        if rules.plane_agreement is not None:     # not those whose planes disagree (no plane to hold a direction)
-            held = held[~direction_known(entities.select(held), replace(rules, plane_agreement=None))]
-        taken, u, rms = dominant_directions(directions[held], mean_view[held], sigma[held], shared, rules.dominant)
-        u, rms, k = u[taken], rms[taken], held[taken]
-        free = ~covered(entities.select(k), u, shared, rules.dominant)
-        k = k[free]
-        dominant[k], directions, sigma = True, directions.copy(), sigma.copy()
-        directions[k], sigma[k] = u[free], np.maximum(rms[free], np.radians(rules.dominant.min_sigma_deg))
+        dominant, directions, sigma = _held_directed(entities, mean_view, sigma, confident, known, rules)
         known = known | dominant
     held = ~known & confident
     confidence = np.where(known, confidence, np.minimum(confidence, UNSURE_CONFIDENCE))
@@ -681,7 +689,7 @@ def _unextracted(start: np.ndarray, end: np.ndarray, context: FrameContext, p: L
     ``context.extracted_left`` lies (``_pieces_on``): the extraction, not the object, failed there."""
     t = np.linspace(0.0, 1.0, 9)[None, :, None]
     uv = start[:, None, :] * (1 - t) + end[:, None, :] * t
-    d = _unit(end - start)
+    d = unit_or_zero(end - start)
     grads, intr = context.left_gradients, context.intrinsics
     shown = edge_evidence(grads, uv, np.stack([-d[:, 1], d[:, 0]], axis=1), (intr.width, intr.height)) \
         >= grads.gradient_threshold
@@ -764,7 +772,7 @@ def planes_from_image(model: Segments, candidates: np.ndarray, pieces: Segments2
     mi = idx[i]
     # the piece's plane through the camera: normal of its two ends' rays, into the object frame
     ends = pieces.endpoints()[j]
-    normal = _unit(view_plane_normals(ends[:, 0], ends[:, 1], intr)) @ T[:3, :3]
+    normal = unit_or_zero(view_plane_normals(ends[:, 0], ends[:, 1], intr)) @ T[:3, :3]
     reference = np.radians(p.reference_direction_sigma_deg)
     x = model.extra
     x["dir_info"][mi] += (p.image_plane_weight * (reference / _plane_sigma(pieces.lengths[j], p)) ** 2
@@ -772,7 +780,7 @@ def planes_from_image(model: Segments, candidates: np.ndarray, pieces: Segments2
     model.directions[mi] = _direction_of_planes(x, model.directions, mi, p)
     x["image_planes"][mi] += 1
     counted = mi[x["image_planes"][mi] >= p.image_plane_min_frames]
-    x["views"][counted] = _add_view(x["views"][counted], _unit(invert(T)[:3, 3] - model.centers[counted]),
+    x["views"][counted] = _add_view(x["views"][counted], unit_or_zero(invert(T)[:3, 3] - model.centers[counted]),
                                     np.radians(p.view_step_deg))
     return mi
 

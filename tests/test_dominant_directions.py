@@ -50,7 +50,7 @@ def _taken(case, p=DominantParams()):
     """(taken (1,) bool as ``to_model`` decides, directions (1, 3), their sigma (1,))."""
     held, view, sigma, shared = case
     taken, directions, rms = dominant_directions(held.directions, view, sigma, shared, p)
-    return taken & ~covered(held, directions, shared, p), directions, rms
+    return taken & ~covered(held.centers, held.lengths, directions, shared, p), directions, rms
 
 
 def _angle_deg(a, b) -> float:
@@ -106,7 +106,7 @@ def test_unsure_observations_take_the_dominant_direction_in_the_running_accumula
     far = np.cos(np.radians(30.0)) * Y + np.sin(np.radians(30.0)) * TOWARDS_CAMERA
     observed = Segments("gripper", np.zeros((3, 3)), np.array([tilted, tilted, far]), np.full(3, 0.02), np.ones(3),
                         np.ones(3, np.int64), {"sigma_direction_rad": np.radians([10.0, 1.0, 10.0])})
-    out = observations_directed(observed, np.array([0.0, 0.0, -0.5]), shared, DominantParams())
+    out = observations_directed(observed, np.tile(TOWARDS_CAMERA, (3, 1)), shared, DominantParams())
     assert _angle_deg(out.directions[0], Y) < 1.0 and np.isclose(out.extra["sigma_direction_rad"][0], np.radians(4.0))
     assert np.array_equal(out.directions[1:], observed.directions[1:])
     assert np.array_equal(out.extra["sigma_direction_rad"][1:], observed.extra["sigma_direction_rad"][1:])
