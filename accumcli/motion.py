@@ -17,7 +17,10 @@ pose smear) refined on frame k+1's images. So:
 4. pass 3 accumulates with the fused poses, and each frame's fused pose is refined against that
    model's accepted segments (``on_model``); each refinement is one more measurement of its frame,
    and ``fuse`` solves again with the links, the recorded poses and these; the ordinary accumulation
-   (the fifth pass over the frames: pass 3 reads them twice, to accumulate and to refine) uses the result. The links rest on one frame's own segments, whose triangulation
+   (the fifth pass over the frames: pass 3 reads them twice, to accumulate and to refine) uses the result,
+   each frame's observations taking on its pose's uncertainty (``fused``'s covariance, times
+   ``covariance_scale``; ``line_model.pose_sigmas``): a frame that no refinement placed well gates
+   wide and weighs little, instead of starting twins beside the segments its neighbours placed. The links rest on one frame's own segments, whose triangulation
    errors bias the out-of-plane rotation by 2-7 deg on some links; the model of all frames averages
    them out. On ``make motion``'s seeds 301-306 refining on the model took the worst shortfall from
    the exact poses' model from 0.044 to 0.027, on seeds 307-312, which nothing here was chosen on,
@@ -43,7 +46,7 @@ import logging
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.linalg import solveh_banded
+from scipy.linalg import cho_solve_banded, cholesky_banded
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
@@ -86,7 +89,13 @@ class MotionParams:
     ``model_min_coverage``: the coverage that refinement needs (``on_model``); ``iterations_per_level``:
     the refinements' Gauss-Newton steps a level (the tracker's 10 took ``make motion`` from 10 to 8 of
     12 seeds within 0.02, worst 0.049 -> 0.078: ``information_scale`` and the gates were measured
-    with 5)."""
+    with 5); ``covariance_scale``: the fused poses' covariance (``fused``) that the accumulation takes
+    on (``FrameContext.pose_covariance``) is multiplied by this: against the truth of ``make motion``'s
+    12 seeds (each frame's error less its seed's mean error, the gauge, which moves the whole model and
+    no observation against another) the median of the squared errors over sigma of the six axes was
+    1.36, where a calibrated covariance gives 0.455 (chi-square, one degree of freedom): the links'
+    residuals stay correlated beyond ``information_scale``, and refinements verify at local minima a
+    few tenths of a degree off."""
 
     near_m: float = 0.01
     near_deg: float = 12.0
@@ -106,6 +115,7 @@ class MotionParams:
     model_gate_mm: float = 8.0
     model_min_coverage: float = 0.3
     iterations_per_level: int = 5
+    covariance_scale: float = 3.0
 
 
 def object_segments(segments_camera: Segments, T_recorded: np.ndarray, skeleton: Segments,
@@ -142,6 +152,12 @@ def correction(T_recorded: np.ndarray, T_refined: np.ndarray) -> np.ndarray:
 
 def fuse(links: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]], n: int, params: MotionParams,
          on_model: dict[int, tuple[np.ndarray, np.ndarray]] | None = None) -> np.ndarray:
+    """(n, 6) the corrections of ``fused`` alone."""
+    return fused(links, n, params, on_model)[0]
+
+
+def fused(links: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]], n: int, params: MotionParams,
+          on_model: dict[int, tuple[np.ndarray, np.ndarray]] | None = None) -> tuple[np.ndarray, np.ndarray | None]:
     """(n, 6) corrections x_k (object frame: rotation vector rad, translation m) of the n recorded
     poses, ``T_k = T_recorded_k exp(x_k)``.
 
@@ -162,11 +178,14 @@ def fuse(links: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]], n: int, pa
     time, the link furthest from the fused poses while its chi-square ``e^T L e`` exceeds
     ``residual_chi2`` (a wrong link that the others and the recorded poses contradict). Frames linked
     share one gauge (their mean error, reduced by the square root of their number); unlinked frames
-    keep their recorded pose. Without links the recorded poses' sigma is unknown and nothing is fused."""
+    keep their recorded pose. Without links the recorded poses' sigma is unknown and nothing is fused.
+
+    Also returns each frame's (6, 6) covariance of x_k (rad^2, m^2; the diagonal blocks of the
+    normal equations' inverse; ``pose_covariance`` for the accumulation), or None where nothing is fused."""
     r = np.repeat([np.radians(params.sigma_relative_deg), params.sigma_relative_m], 3)
     x = np.zeros((n, 6))
     if not links or n < 2:
-        return x
+        return x, None
     s = np.maximum(np.repeat(_recorded_sigma(links.values()), 3), r)
     spread = 2 * s ** 2 + r ** 2     # the variance of two recorded poses' difference, per axis
     used = {jk: (c, L / params.information_scale) for jk, (c, L) in links.items()
@@ -177,13 +196,13 @@ def fuse(links: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]], n: int, pa
              len(used), len(links), f", {len(measured)} frames measured on the model" if on_model is not None else "",
              np.degrees(s[0]), s[3] * 1000)
     while True:
-        x = _solve(used, n, s, measured)
+        factor, x = _solve(used, n, s, measured)
         if not used or params.residual_chi2 is None:
-            return x
+            return x, _block_covariance(factor, n)
         chi2 = {jk: float((x[jk[1]] - x[jk[0]] - c) @ L @ (x[jk[1]] - x[jk[0]] - c)) for jk, (c, L) in used.items()}
         worst = max(chi2, key=chi2.get)
         if chi2[worst] <= params.residual_chi2:
-            return x
+            return x, _block_covariance(factor, n)
         del used[worst]
 
 
@@ -200,10 +219,10 @@ def _recorded_sigma(links) -> np.ndarray:
     return np.median(np.array(along), axis=0) / (0.6745 * np.sqrt(2))
 
 
-def _solve(used: dict, n: int, s: np.ndarray, measured: dict) -> np.ndarray:
-    """(n, 6) the least-squares corrections of ``fuse`` for the links ``used`` ((c, L) by (j, k)) and
-    the frames ``measured`` ((m, M) by k): the normal equations of all frames, block-banded (6 x 6
-    blocks within the links' span)."""
+def _solve(used: dict, n: int, s: np.ndarray, measured: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The Cholesky factor (``cholesky_banded``, upper form) of the normal equations of ``fused`` for
+    the links ``used`` ((c, L) by (j, k)) and the frames ``measured`` ((m, M) by k), block-banded (6 x 6
+    blocks within the links' span), and the (n, 6) least-squares corrections."""
     band = 6 * max([k - j for j, k in used] or [1]) + 5
     banded = np.zeros((band + 1, 6 * n))        # upper form: banded[band + i - j, j] = H[i, j], i <= j
     banded[band] = np.tile(1 / s ** 2, n)
@@ -220,7 +239,21 @@ def _solve(used: dict, n: int, s: np.ndarray, measured: dict) -> np.ndarray:
     for k, (measurement, M) in measured.items():
         rhs[6 * k:6 * k + 6] += M @ measurement
         banded[band + rows - cols, 6 * k + cols] += M[rows, cols]
-    return solveh_banded(banded, rhs).reshape(n, 6)
+    factor = cholesky_banded(banded)
+    return factor, cho_solve_banded((factor, False), rhs).reshape(n, 6)
+
+
+def _block_covariance(factor: np.ndarray, n: int, chunk: int = 64) -> np.ndarray:
+    """(n, 6, 6) the diagonal blocks of the inverse of the banded matrix whose Cholesky factor is
+    ``factor``: solved against the identity's columns ``chunk`` frames at a time (memory 36 n chunk)."""
+    blocks = np.empty((n, 6, 6))
+    for start in range(0, n, chunk):
+        stop = min(start + chunk, n)
+        rhs = np.zeros((6 * n, 6 * (stop - start)))
+        rhs[6 * start:6 * stop] = np.eye(6 * (stop - start))
+        own = cho_solve_banded((factor, False), rhs)[6 * start:6 * stop].reshape(stop - start, 6, stop - start, 6)
+        blocks[start:stop] = own[np.arange(stop - start), :, np.arange(stop - start), :]
+    return blocks
 
 
 def link_information(estimate) -> np.ndarray:

@@ -127,11 +127,14 @@ class LineAccumulation:
         return extract_frame(frame, self.params.extract, self.camera_frame, self.times)
 
     def step(self, frame: StereoFrame, T_camera_object: np.ndarray,
-             extraction: FrameSegments | None = None, T_corrected: np.ndarray | None = None) -> AccumulationStep:
+             extraction: FrameSegments | None = None, T_corrected: np.ndarray | None = None,
+             pose_covariance: np.ndarray | None = None) -> AccumulationStep:
         """Extract (unless given) and accumulate one frame seen at pose ``T_camera_object`` (recorded).
         With tracked motion, ``T_corrected`` (4, 4; ``runs.accumulation.tracked_poses``, the passes of
         ``motion``) is used instead of the refinement against the model so far, which is the
-        one-pass fallback (it fails at 1.5 deg / 4 mm of noise: see ``motion``)."""
+        one-pass fallback (it fails at 1.5 deg / 4 mm of noise: see ``motion``). ``pose_covariance``
+        (6, 6; ``motion.fused``): the used pose's uncertainty, which the observations take on
+        (``FrameContext``); None: the pose is taken as exact."""
         extraction = extraction or self.extract(frame)
         estimate = None
         if self.params.motion == "tracked" and T_corrected is not None:
@@ -140,7 +143,8 @@ class LineAccumulation:
         elif self.params.motion == "tracked":
             T_camera_object, estimate = self._refined(frame, T_camera_object, extraction)
         context = FrameContext(T_camera_object, frame.intrinsics, frame.border_distance,
-                               *self._miss_test_inputs(frame, extraction), shared=self._shared)
+                               *self._miss_test_inputs(frame, extraction), shared=self._shared,
+                               pose_covariance=pose_covariance)
         segments = extraction.segments
         if self.params.box is not None:
             segments = segments.select(inside_box(transform_points(invert(T_camera_object), segments.centers),

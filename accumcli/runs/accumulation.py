@@ -20,7 +20,7 @@ from ..lines2d import StageTimes
 from ..logs import LimitedWarnings
 from ..geometry import invert, pose_error
 from ..model_io import POSES_TOPIC, PoseTrack, read_truth, write_json_lines, write_model, write_ply
-from ..motion import MotionParams, corrected, frame_to_frame, fuse, object_segments, on_model
+from ..motion import MotionParams, corrected, frame_to_frame, fused, object_segments, on_model
 from ..outputs import OutputSet
 from ..pipeline import AccumulateParams, LineAccumulation
 from ..row_check import RowCheck
@@ -145,7 +145,7 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
         if params.motion == "tracked":
             with_pose = (lambda: (f for f in counted_frames() if f.T_camera_object is not None))
             store = ExtractionStore()
-            repaired, repair_status = tracked_poses(with_pose, params, rec.object_frame, rec.camera_frame, workers,
+            repaired, repair_status, pose_covariance = tracked_poses(with_pose, params, rec.object_frame, rec.camera_frame, workers,
                                                     acc.times, store)
         # closing: an interrupt must end the extraction helpers here, not when the generator is collected
         with rerun_log(files, rrd, "accumulate") as viz, scene_log(files, outputs) as scenes, \
@@ -154,7 +154,8 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
                     frames_with_pose(), params.extract, rec.camera_frame, workers, acc.times)) as extractions:
             for frame, extraction in extractions:
                 step = acc.step(frame, frame.T_camera_object, extraction,
-                                T_corrected=None if repaired is None else repaired[frame.index])
+                                T_corrected=None if repaired is None else repaired[frame.index],
+                                pose_covariance=None if repaired is None else pose_covariance.get(frame.index))
                 if repaired is not None:
                     repair_rows.append((frame.timestamp_ns, frame.T_camera_object, repaired[frame.index],
                                         repair_status[frame.index]))
@@ -316,9 +317,10 @@ def pose_correction(T_recorded: np.ndarray, T_repaired: np.ndarray) -> dict:
 
 def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str, camera_frame: str, workers: int,
                   times, store: ExtractionStore, motion: MotionParams = MotionParams()
-                  ) -> tuple[dict[int, np.ndarray], dict[int, str]]:
+                  ) -> tuple[dict[int, np.ndarray], dict[int, str], dict[int, np.ndarray]]:
     """frame index -> the repaired T_camera_object (4, 4) of every frame ``frames_with_pose()`` yields,
-    and frame index -> how the images placed it (``REPAIR_STATUS``)
+    frame index -> how the images placed it (``REPAIR_STATUS``) and frame index -> its (6, 6)
+    covariance (``motion.fused``; empty where nothing was fused)
     (called once per pass: the recording is streamed again; its extractions are recorded in ``store``
     by pass 1 and replayed after), by the passes of ``motion``: pass 1 accumulates with the recorded
     poses, pass 2 measures the frame-to-frame corrections against pass 1's accepted segments, ``fuse``
@@ -362,21 +364,23 @@ def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str,
                 links[j, k] = c
         previous.append((k, object_segments(extraction.segments, frame.T_camera_object, skeleton, motion)))
         recorded.append((frame.index, frame.T_camera_object))
-    x = fuse(links, len(recorded), motion)
-    fused = {index: corrected(T, xk) for (index, T), xk in zip(recorded, x)}
+    x, covariance = fused(links, len(recorded), motion)
+    poses = {index: corrected(T, xk) for (index, T), xk in zip(recorded, x)}
     # a frame that ``fuse`` left unlinked (no link, or all of them dropped) keeps its recorded pose exactly
     status = {index: "linked" if np.any(xk) else "recorded" for (index, _), xk in zip(recorded, x)}
-    if not motion.model_pass:
-        return fused, status
-    model = accepted(store.replay(frames_with_pose()), lambda frame: fused[frame.index])
-    measured = {}
-    for k, (frame, extraction) in enumerate(store.replay(frames_with_pose())):
-        t0 = time.perf_counter()
-        found = on_model(model, frame, fused[frame.index], params.track, extraction.gradients, motion)
-        times.add("tracking", t0)
-        if found is not None:
-            measured[k] = (x[k] + found[0], found[1])   # T_recorded exp(x_k) exp(c) ~ T_recorded exp(x_k + c)
-            status[frame.index] = "tracked"
-    x = fuse(links, len(recorded), motion, measured)
-    return {index: corrected(T, xk) for (index, T), xk in zip(recorded, x)}, status
+    if motion.model_pass:
+        model = accepted(store.replay(frames_with_pose()), lambda frame: poses[frame.index])
+        measured = {}
+        for k, (frame, extraction) in enumerate(store.replay(frames_with_pose())):
+            t0 = time.perf_counter()
+            found = on_model(model, frame, poses[frame.index], params.track, extraction.gradients, motion)
+            times.add("tracking", t0)
+            if found is not None:
+                measured[k] = (x[k] + found[0], found[1])   # T_recorded exp(x_k) exp(c) ~ T_recorded exp(x_k + c)
+                status[frame.index] = "tracked"
+        x, covariance = fused(links, len(recorded), motion, measured)
+        poses = {index: corrected(T, xk) for (index, T), xk in zip(recorded, x)}
+    covariances = {} if covariance is None else {index: motion.covariance_scale * C
+                                                 for (index, _), C in zip(recorded, covariance)}
+    return poses, status, covariances
 
