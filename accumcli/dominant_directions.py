@@ -70,6 +70,19 @@ which barely turns, took 91 segments of which 14 on the box or its board (surfac
 0.414): its one-aspect directions rest on stereo alone; candidates only within 3 to 10 cm of the held
 segment instead cost a quarter to two thirds of the gain elsewhere and still lowered the teabox's (0.490
 to 0.533).
+
+Measured and not kept (``make suite``, 4 runs a row, 2026-12-07): each frame's unsure segments taking
+the directions its own sure ones share (stereo sigma at most ``unsure_deg``; this rule with the frame's
+camera), in the extraction: single-frame correct 3D up by 0.005 to 0.02 a row (dev_tprofile 0.496 ->
+0.505) and near-object precision by 0.02 to 0.04 (dev_steps 0.821 -> 0.857, dev_tprofile 0.879 ->
+0.901), but the accumulated models no better: precision median of the simulated and chessboard rows
+0.966 -> 0.962 (sim_104 0.980 -> 0.962), completeness within 0.01 on every row (dev_cube_small 0.455 ->
+0.447, the teabox 0.658 -> 0.647). The model's shared directions, seen from more than one aspect,
+already do this for the accumulation, and a frame's sure segments rest on one aspect's stereo. Of the
+single-frame segments within 4 mm of an edge but more than 10 degrees off its direction (10 to 27 % of
+the near-object length on the devset and sim_105), such a rule reaches few: for 16 to 52 % of them no
+sure segment of the frame has the edge's direction, for 19 to 48 % that direction lies more than 2
+degrees out of the segment's view plane (its 2D line is off).
 """
 
 from __future__ import annotations
