@@ -55,8 +55,10 @@ by the known motion (the entity type's ``transform``):
    completeness 0.658 -> 0.711 (found in any confidence 0.706 -> 0.752), the
    completeness mean 0.748 -> 0.755 and worst row 0.455 -> 0.467, but the
    precision median 0.969 -> 0.964 (sim_104 0.980 -> 0.965, sim_110 0.976 ->
-   0.958, sim_103 under 0.95); on the teabox alone, ``tentative_frames`` 30
-   gave 0.671 and a wider gate (5 mm, 10 degrees) 0.643.
+   0.958, sim_103 under 0.95); ``p_max`` 0.5: the teabox 0.677, completeness
+   mean 0.750, precision median 0.968, within the runs' scatter; on the teabox
+   alone, ``tentative_frames`` 30 gave 0.671 and a wider gate (5 mm, 10
+   degrees) 0.643.
 5. Model entities that duplicate each other (the entity type's ``same``) are
    merged: they would otherwise compete for the same observations.
 6. Unmatched observations join the model with confidence ``initial``.
