@@ -33,7 +33,8 @@ Entities are ``Segments`` in the object frame with running sums in ``extra``:
 - ``dir_sum`` (N, 3): the sum of the sign-aligned directions, each weighted
   by its confidence and the inverse variance of its direction, which sets the
   direction instead with ``accum accumulate --average-directions``. The
-  planes trust the poses to ``pose_rotation_sigma_deg``: ``--motion tracked``
+  planes trust the poses to ``pose_rotation_sigma_deg`` (or a pose's own rotation
+  sigma where ``FrameContext.pose_covariance`` gives a larger one): ``--motion tracked``
   builds its intermediate models by averaging
   (``runs.accumulation.tracked_poses``); ``weight`` (N,): the sum of
   confidences;
@@ -803,7 +804,10 @@ def planes_from_image(model: Segments, candidates: np.ndarray, pieces: Segments2
     normal = unit_or_zero(view_plane_normals(ends[:, 0], ends[:, 1], intr)) @ T[:3, :3]
     reference = np.radians(p.reference_direction_sigma_deg)
     x = model.extra
-    x["dir_info"][mi] += (p.image_plane_weight * (reference / _plane_sigma(pieces.lengths[j], p)) ** 2
+    pose_rotation = np.radians(p.pose_rotation_sigma_deg)
+    if context.pose_covariance is not None:     # as ``observe``'s planes
+        pose_rotation = max(pose_rotation, pose_sigmas(np.zeros((0, 3)), context.pose_covariance)[1])
+    x["dir_info"][mi] += (p.image_plane_weight * (reference / _plane_sigma(pieces.lengths[j], p, pose_rotation)) ** 2
                           )[:, None, None] * outer(normal)
     model.directions[mi] = _direction_of_planes(x, model.directions, mi, p)
     x["image_planes"][mi] += 1
