@@ -152,6 +152,15 @@ def unit(vectors: np.ndarray) -> np.ndarray:
     return vectors / np.linalg.norm(vectors, axis=-1, keepdims=True)
 
 
+def skew(vectors: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) the cross-product matrices [v]_x of ``vectors`` (..., 3): [v]_x w = v x w."""
+    v = np.asarray(vectors, float)
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
+    return out
+
+
 def unit_or_zero(vectors: np.ndarray) -> np.ndarray:
     """Rows of ``vectors: (..., 3)`` scaled to unit length; zero rows stay zero (``unit`` gives NaN)."""
     return vectors / np.maximum(np.linalg.norm(vectors, axis=-1, keepdims=True), 1e-12)

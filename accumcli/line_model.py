@@ -98,7 +98,7 @@ from scipy.spatial import cKDTree
 
 from .dominant_directions import DominantParams, covered, dominant_directions, observations_directed
 from .edge_evidence import edge_evidence
-from .geometry import check_points, check_transform, invert, outer, transform_points, unit_or_zero
+from .geometry import check_points, check_transform, invert, outer, skew, transform_points, unit_or_zero
 from .grouping import best_per_key
 from .lines2d import Gradients, Segments2D
 from .metric import MetricThresholds, candidate_pairs, d_o, d_p, pair_costs
@@ -164,7 +164,7 @@ class FrameContext:
     left_gradients: Gradients | None = None   # the left image's (``expected``: does it show a segment's edge?)
     extracted_left: Segments2D | None = None  # the left pieces that gave this frame's 3D segments
     shared: Segments | None = None    # the model's accepted segments seen from more than one aspect (``shared_directions``)
-    pose_covariance: np.ndarray | None = None   # (6, 6) of the pose (``motion.fused``); None: exact (``pose_sigmas``)
+    pose_covariance: np.ndarray | None = None   # (6, 6) of the pose (``motion.fuse``); None: exact (``pose_sigmas``)
 
     def __post_init__(self):
         self.T_camera_object = check_transform(self.T_camera_object, "T_camera_object")
@@ -259,11 +259,10 @@ class LineSegmentType:
         sigma_lat = depth * p.lateral_sigma_px / context.intrinsics.fx
         sigma_depth = observed.extra.get("sigma_depth_m", sigma_lat * 10)
         sigma_direction = observed.extra.get("sigma_direction_rad", np.full(len(observed), np.radians(5.0)))
-        pose_rotation = np.radians(p.pose_rotation_sigma_deg)
         if context.pose_covariance is not None:     # the pose's own error, on top of the images'
             pose_position, rotation = pose_sigmas(observed.centers, context.pose_covariance)
             sigma_lat, sigma_depth = np.hypot(sigma_lat, pose_position), np.hypot(sigma_depth, pose_position)
-            sigma_direction, pose_rotation = np.hypot(sigma_direction, rotation), max(pose_rotation, rotation)
+            sigma_direction = np.hypot(sigma_direction, rotation)
         u = observed.directions
         # covariance a I + b r r^T; its inverse by Sherman-Morrison: (I - b / (a + b) r r^T) / a
         a = sigma_lat ** 2
@@ -291,7 +290,7 @@ class LineSegmentType:
             sine = np.linalg.norm(normal, axis=1)
             normal = normal / np.maximum(sine, 1e-9)[:, None]
             length_px = context.intrinsics.fx * observed.lengths * sine / np.maximum(depth, 1e-9)
-            sigma_plane = _plane_sigma(length_px, p, pose_rotation)
+            sigma_plane = _plane_sigma(length_px, p, context)
             plane_weight = np.where(sine >= p.min_plane_sine, w * (reference / sigma_plane) ** 2, 0.0)
             out.extra["dir_info"] = direction_weight[:, None, None] * across + \
                 plane_weight[:, None, None] * outer(normal)
@@ -395,18 +394,21 @@ def _planes_figures(dir_info: np.ndarray, p: LineModelParams) -> tuple[np.ndarra
             (values[:, 1] - values[:, 0]) / np.radians(p.reference_direction_sigma_deg) ** 2)
 
 
-def _plane_sigma(length_px: np.ndarray, p: LineModelParams, pose_rotation: float | None = None) -> np.ndarray:
+def _plane_sigma(length_px: np.ndarray, p: LineModelParams, context: FrameContext | None = None) -> np.ndarray:
     """(N,) rad: the sigma of the plane through the camera and a 2D line of ``length_px`` pixels, from
-    its edge points' scatter (``line_sigma_px``) and the pose's rotation (``pose_rotation`` rad; None:
-    ``pose_rotation_sigma_deg``)."""
+    its edge points' scatter (``line_sigma_px``) and the pose's rotation (``pose_rotation_sigma_deg``,
+    or the frame's pose's own rotation sigma where ``context.pose_covariance`` gives a larger one)."""
     line_sigma = p.line_sigma_px * np.sqrt(12.0 / np.maximum(length_px, 1.0)) / np.maximum(length_px, 1.0)
-    return np.hypot(line_sigma, np.radians(p.pose_rotation_sigma_deg) if pose_rotation is None else pose_rotation)
+    pose_rotation = np.radians(p.pose_rotation_sigma_deg)
+    if context is not None and context.pose_covariance is not None:
+        pose_rotation = max(pose_rotation, pose_sigmas(np.zeros((0, 3)), context.pose_covariance)[1])
+    return np.hypot(line_sigma, pose_rotation)
 
 
 def pose_sigmas(centers: np.ndarray, covariance: np.ndarray) -> tuple[np.ndarray, float]:
     """What a pose's error does to what it places: ``centers`` (N, 3) m, object frame, the pose
     ``T_camera_object = T exp(x)`` with x (rotation vector rad, translation m; object frame) of
-    ``covariance`` (6, 6) about 0 (``motion.fused``). Returns the position sigma (N,) m of each
+    ``covariance`` (6, 6) about 0 (``motion.fuse``). Returns the position sigma (N,) m of each
     centre (the root-mean-square over the three axes of its displacement ``[p]_x theta - t``) and the
     rotation's sigma (rad, the root-mean-square over its three axes), which tilts directions and view
     planes. Why: with repaired poses (``--motion tracked``) a frame placed by a refinement on the model
@@ -418,10 +420,8 @@ def pose_sigmas(centers: np.ndarray, covariance: np.ndarray) -> tuple[np.ndarray
     each observation's position covariance instead measured 9 of 12, median 0.009, worst 0.052
     (302 0.015 -> 0.025, 306 0.019 -> 0.032; tracked runs of the 12 seeds, 4 dithers, 2026-12-07):
     not kept."""
-    p = np.asarray(centers, float)
-    J = np.zeros((len(p), 3, 6))
-    J[:, 0, 1], J[:, 0, 2], J[:, 1, 0], J[:, 1, 2], J[:, 2, 0], J[:, 2, 1] = -p[:, 2], p[:, 1], p[:, 2], -p[:, 0], -p[:, 1], p[:, 0]
-    J[:, :, 3:] = -np.eye(3)
+    p = np.asarray(centers, float).reshape(-1, 3)
+    J = np.concatenate([skew(p), np.broadcast_to(-np.eye(3), (len(p), 3, 3))], axis=2)     # (N, 3, 6)
     position = np.sqrt(np.einsum("nij,jk,nik->n", J, covariance, J) / 3)
     return position, float(np.sqrt(np.trace(covariance[:3, :3]) / 3))
 
@@ -809,10 +809,7 @@ def planes_from_image(model: Segments, candidates: np.ndarray, pieces: Segments2
     normal = unit_or_zero(view_plane_normals(ends[:, 0], ends[:, 1], intr)) @ T[:3, :3]
     reference = np.radians(p.reference_direction_sigma_deg)
     x = model.extra
-    pose_rotation = np.radians(p.pose_rotation_sigma_deg)
-    if context.pose_covariance is not None:     # as ``observe``'s planes
-        pose_rotation = max(pose_rotation, pose_sigmas(np.zeros((0, 3)), context.pose_covariance)[1])
-    x["dir_info"][mi] += (p.image_plane_weight * (reference / _plane_sigma(pieces.lengths[j], p, pose_rotation)) ** 2
+    x["dir_info"][mi] += (p.image_plane_weight * (reference / _plane_sigma(pieces.lengths[j], p, context)) ** 2
                           )[:, None, None] * outer(normal)
     model.directions[mi] = _direction_of_planes(x, model.directions, mi, p)
     x["image_planes"][mi] += 1

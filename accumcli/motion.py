@@ -18,7 +18,7 @@ pose smear) refined on frame k+1's images. So:
    model's accepted segments (``on_model``); each refinement is one more measurement of its frame,
    and ``fuse`` solves again with the links, the recorded poses and these; the ordinary accumulation
    (the fifth pass over the frames: pass 3 reads them twice, to accumulate and to refine) uses the result,
-   each frame's observations taking on its pose's uncertainty (``fused``'s covariance, times
+   each frame's observations taking on its pose's uncertainty (``fuse``'s covariance, times
    ``covariance_scale``; ``line_model.pose_sigmas``): a frame that no refinement placed well gates
    wide and weighs little, instead of starting twins beside the segments its neighbours placed. The links rest on one frame's own segments, whose triangulation
    errors bias the out-of-plane rotation by 2-7 deg on some links; the model of all frames averages
@@ -50,7 +50,7 @@ from scipy.linalg import cho_solve_banded, cholesky_banded
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from .geometry import invert, make_transform
+from .geometry import invert, make_transform, skew
 from .segments import Segments
 from .track import TrackParams, refine_pose
 
@@ -89,7 +89,7 @@ class MotionParams:
     ``model_min_coverage``: the coverage that refinement needs (``on_model``); ``iterations_per_level``:
     the refinements' Gauss-Newton steps a level (the tracker's 10 took ``make motion`` from 10 to 8 of
     12 seeds within 0.02, worst 0.049 -> 0.078: ``information_scale`` and the gates were measured
-    with 5); ``covariance_scale``: the fused poses' covariance (``fused``) that the accumulation takes
+    with 5); ``covariance_scale``: the fused poses' covariance (``fuse``) that the accumulation takes
     on (``FrameContext.pose_covariance``) is multiplied by this: against the truth of ``make motion``'s
     12 seeds (each frame's error less its seed's mean error, the gauge, which moves the whole model and
     no observation against another) the median of the squared errors over sigma of the six axes was
@@ -151,13 +151,7 @@ def correction(T_recorded: np.ndarray, T_refined: np.ndarray) -> np.ndarray:
 
 
 def fuse(links: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]], n: int, params: MotionParams,
-         on_model: dict[int, tuple[np.ndarray, np.ndarray]] | None = None) -> np.ndarray:
-    """(n, 6) the corrections of ``fused`` alone."""
-    return fused(links, n, params, on_model)[0]
-
-
-def fused(links: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]], n: int, params: MotionParams,
-          on_model: dict[int, tuple[np.ndarray, np.ndarray]] | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+         on_model: dict[int, tuple[np.ndarray, np.ndarray]] | None = None) -> tuple[np.ndarray, np.ndarray | None]:
     """(n, 6) corrections x_k (object frame: rotation vector rad, translation m) of the n recorded
     poses, ``T_k = T_recorded_k exp(x_k)``.
 
@@ -220,7 +214,7 @@ def _recorded_sigma(links) -> np.ndarray:
 
 
 def _solve(used: dict, n: int, s: np.ndarray, measured: dict) -> tuple[np.ndarray, np.ndarray]:
-    """The Cholesky factor (``cholesky_banded``, upper form) of the normal equations of ``fused`` for
+    """The Cholesky factor (``cholesky_banded``, upper form) of the normal equations of ``fuse`` for
     the links ``used`` ((c, L) by (j, k)) and the frames ``measured`` ((m, M) by k), block-banded (6 x 6
     blocks within the links' span), and the (n, 6) least-squares corrections."""
     band = 6 * max([k - j for j, k in used] or [1]) + 5
@@ -263,8 +257,7 @@ def link_information(estimate) -> np.ndarray:
     A^-1 = [[R, 0], [[t - pivot]_x R, R]], so L_x = A^-T L_y A^-1."""
     T = estimate.T_camera_object
     R, a = T[:3, :3], T[:3, 3] - estimate.pivot
-    skew = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-    A_inv = np.block([[R, np.zeros((3, 3))], [skew @ R, R]])
+    A_inv = np.block([[R, np.zeros((3, 3))], [skew(a) @ R, R]])
     return A_inv.T @ estimate.information @ A_inv
 
 

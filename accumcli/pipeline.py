@@ -133,7 +133,7 @@ class LineAccumulation:
         With tracked motion, ``T_corrected`` (4, 4; ``runs.accumulation.tracked_poses``, the passes of
         ``motion``) is used instead of the refinement against the model so far, which is the
         one-pass fallback (it fails at 1.5 deg / 4 mm of noise: see ``motion``). ``pose_covariance``
-        (6, 6; ``motion.fused``): the used pose's uncertainty, which the observations take on
+        (6, 6; ``motion.fuse``): the used pose's uncertainty, which the observations take on
         (``FrameContext``); None: the pose is taken as exact."""
         extraction = extraction or self.extract(frame)
         estimate = None

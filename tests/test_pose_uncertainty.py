@@ -1,4 +1,4 @@
-"""A repaired pose's uncertainty (``motion.fused``) and what the accumulation does with it
+"""A repaired pose's uncertainty (``motion.fuse``) and what the accumulation does with it
 (``line_model.pose_sigmas``, ``FrameContext.pose_covariance``)."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from accumcli.line_model import FrameContext, LineSegmentType, pose_sigmas
-from accumcli.motion import MotionParams, _block_covariance, _recorded_sigma, _solve, fused
+from accumcli.motion import MotionParams, _block_covariance, _recorded_sigma, _solve, fuse
 from accumcli.segments import Segments
 from tests.test_accumulate import INTR, _tilted_towards_camera
 
@@ -33,7 +33,7 @@ def test_fused_covariance_is_the_inverse_of_the_normal_equations_blocks():
     n, unlinked = 9, 4
     params = MotionParams(residual_chi2=None, gate_chi2=np.inf, gate_sigmas=np.inf)
     links = _links(n, unlinked, rng)
-    _, covariance = fused(links, n, params)
+    _, covariance = fuse(links, n, params)
     r = np.repeat([np.radians(params.sigma_relative_deg), params.sigma_relative_m], 3)
     s = np.maximum(np.repeat(_recorded_sigma(links.values()), 3), r)
     H = np.diag(np.tile(1 / s ** 2, n))
@@ -48,7 +48,7 @@ def test_fused_covariance_is_the_inverse_of_the_normal_equations_blocks():
     linked = [k for k in range(n) if k != unlinked]
     # two chains of four frames: each shares its mean error, a quarter of the prior variance
     assert (np.diagonal(covariance[linked], axis1=1, axis2=2) < 0.3 * s ** 2).all()
-    assert fused({}, n, params)[1] is None          # nothing fused: no uncertainty to tell
+    assert fuse({}, n, params)[1] is None          # nothing fused: no uncertainty to tell
     # the blocks solved a few frames at a time are those solved all at once
     used = {jk: (c, L / params.information_scale) for jk, (c, L) in links.items()}
     factor, _ = _solve(used, n, s, {})

@@ -20,7 +20,7 @@ from ..lines2d import StageTimes
 from ..logs import LimitedWarnings
 from ..geometry import invert, pose_error
 from ..model_io import POSES_TOPIC, PoseTrack, read_truth, write_json_lines, write_model, write_ply
-from ..motion import MotionParams, corrected, frame_to_frame, fused, object_segments, on_model
+from ..motion import MotionParams, corrected, frame_to_frame, fuse, object_segments, on_model
 from ..outputs import OutputSet
 from ..pipeline import AccumulateParams, LineAccumulation
 from ..row_check import RowCheck
@@ -320,7 +320,7 @@ def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str,
                   ) -> tuple[dict[int, np.ndarray], dict[int, str], dict[int, np.ndarray]]:
     """frame index -> the repaired T_camera_object (4, 4) of every frame ``frames_with_pose()`` yields,
     frame index -> how the images placed it (``REPAIR_STATUS``) and frame index -> its (6, 6)
-    covariance (``motion.fused``; empty where nothing was fused)
+    covariance (``motion.fuse``; empty where nothing was fused)
     (called once per pass: the recording is streamed again; its extractions are recorded in ``store``
     by pass 1 and replayed after), by the passes of ``motion``: pass 1 accumulates with the recorded
     poses, pass 2 measures the frame-to-frame corrections against pass 1's accepted segments, ``fuse``
@@ -364,8 +364,11 @@ def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str,
                 links[j, k] = c
         previous.append((k, object_segments(extraction.segments, frame.T_camera_object, skeleton, motion)))
         recorded.append((frame.index, frame.T_camera_object))
-    x, covariance = fused(links, len(recorded), motion)
-    poses = {index: corrected(T, xk) for (index, T), xk in zip(recorded, x)}
+    def placed(x: np.ndarray) -> dict[int, np.ndarray]:
+        return {index: corrected(T, xk) for (index, T), xk in zip(recorded, x)}
+
+    x, covariance = fuse(links, len(recorded), motion)
+    poses = placed(x)
     # a frame that ``fuse`` left unlinked (no link, or all of them dropped) keeps its recorded pose exactly
     status = {index: "linked" if np.any(xk) else "recorded" for (index, _), xk in zip(recorded, x)}
     if motion.model_pass:
@@ -378,8 +381,8 @@ def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str,
             if found is not None:
                 measured[k] = (x[k] + found[0], found[1])   # T_recorded exp(x_k) exp(c) ~ T_recorded exp(x_k + c)
                 status[frame.index] = "tracked"
-        x, covariance = fused(links, len(recorded), motion, measured)
-        poses = {index: corrected(T, xk) for (index, T), xk in zip(recorded, x)}
+        x, covariance = fuse(links, len(recorded), motion, measured)
+        poses = placed(x)
     covariances = {} if covariance is None else {index: motion.covariance_scale * C
                                                  for (index, _), C in zip(recorded, covariance)}
     return poses, status, covariances
