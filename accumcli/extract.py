@@ -16,7 +16,7 @@ from .recording import StereoFrame
 from .critical import triangulate_critical
 from .guided import GuidedParams, guided_matches
 from .segments import Segments, concatenate
-from .stereo import Matches, StereoParams, match, triangulate
+from .stereo import Matches, StereoParams, crowding, match, triangulate
 
 
 @dataclass(frozen=True)
@@ -70,10 +70,12 @@ def extract_frame(frame: StereoFrame, params: ExtractParams = ExtractParams(), c
     m, right = guided_matches(frame.left, frame.right, left, right, m, grads[1], frame.intrinsics, params.stereo,
                               params.guided)
     t0 = times.add("matching", t0)
-    segments, kept = triangulate(left, right, m, frame.intrinsics, params.stereo, camera_frame)
+    crowd = crowding(left), crowding(right)     # once: triangulation and the critical pieces take it
+    segments, kept = triangulate(left, right, m, frame.intrinsics, params.stereo, camera_frame, crowd)
     t0 = times.add("triangulation", t0)
     by_ends, critical_left = triangulate_critical(frame.left, frame.right, left, tuple(grads), frame.intrinsics,
-                                                  params.stereo, camera_frame, segments, left.select(m.left[kept]))
+                                                  params.stereo, camera_frame, segments, left.select(m.left[kept]),
+                                                  crowd[0])
     times.add("critical", t0)
     # right_2d: what the detector found; right_found: what the right-image search added (``guided``)
     counts = {"left_2d": len(left), "right_2d": detected_right, "right_found": len(right) - detected_right,

@@ -118,7 +118,7 @@ RUNNING_SUMS = ("info", "info_vec", "dir_sum", "weight", "inv_var_position", "in
 @dataclass(frozen=True)
 class LineModelParams:
     thresholds: MetricThresholds = MetricThresholds()
-    lateral_sigma_px: float = 0.3
+    lateral_sigma_px: float = 0.3           # px, of observations that carry no sigma_lateral_px (``stereo``)
     max_weight: float = 20.0
     aspect_margin_deg: float = 15.0
     critical_angle_deg: float = 8.0   # AccumulateParams sets it to StereoParams.critical_angle_deg
@@ -256,7 +256,7 @@ class LineSegmentType:
                 "sigma_direction_rad" in observed.extra:
             observed = observations_directed(observed, ray, context.shared, p.dominant)
         depth = distance[:, 0]
-        sigma_lat = depth * p.lateral_sigma_px / context.intrinsics.fx
+        sigma_lat = depth * observed.extra.get("sigma_lateral_px", p.lateral_sigma_px) / context.intrinsics.fx
         sigma_depth = observed.extra.get("sigma_depth_m", sigma_lat * 10)
         sigma_direction = observed.extra.get("sigma_direction_rad", np.full(len(observed), np.radians(5.0)))
         if context.pose_covariance is not None:     # the pose's own error, on top of the images'

@@ -657,7 +657,7 @@ def _image_failures(e: PoseEstimate, p: TrackParams) -> list[str]:
     covered = e.coverage_found if weighed else e.coverage
     if not covered >= p.min_coverage:
         how = f" weighed by what recent frames found ({e.coverage:.2f} unweighed)" if weighed else ""
-        failed.append(f"coverage {covered:.2f} in both images{how} (needs {p.min_coverage})")
+        failed.append(f"coverage {covered:.2f} in both images{how} (needs {p.min_coverage:.2f})")
     if not e.shown >= p.min_shown:
         failed.append(f"{e.shown:.1%} of the model expected in view (needs {p.min_shown:.0%})")
     if not e.shown_segments >= p.min_shown_segments:
@@ -672,7 +672,7 @@ def _determination_failures(e: PoseEstimate, p: TrackParams) -> list[str]:
         return ["the pose is not determined (singular Gauss-Newton system)"]
     if not (e.std_rotation_deg.max() <= p.max_std_deg and e.std_translation_mm.max() <= p.max_std_mm):
         return [f"standard deviation {e.std_rotation_deg.max():.2f} deg, {e.std_translation_mm.max():.2f} mm "
-                f"(needs <= {p.max_std_deg} deg, {p.max_std_mm} mm)"]
+                f"(needs <= {p.max_std_deg:.2f} deg, {p.max_std_mm:.1f} mm)"]
     return []
 
 
