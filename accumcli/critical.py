@@ -58,7 +58,7 @@ from .ncc_kernel import ends_on_lines, row_ncc
 from .lines2d import Gradients, Segments2D, parabola_peak, sample
 from .recording import StereoIntrinsics
 from .segments import Segments
-from .stereo import StereoParams, angle_from_rows, backproject, crowded_sigma, crowding
+from .stereo import StereoParams, angle_from_rows, backproject, crowding, lateral_sigma
 
 
 def _runs(left: Segments2D, index: np.ndarray, gap_px: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -265,11 +265,10 @@ def triangulate_critical(left_img: np.ndarray, right_img: np.ndarray, left: Segm
     sigma_direction = np.arctan2(depth_per_disparity * slope_sigma * 2 * half_t, np.maximum(length, 1e-9))
     # confidence (the stereo score): the least a trusted end scores, as a piece has no patch score of its own
     score = np.full(len(seg), params.end_min_ncc)
-    crowd = (crowding(left) if left_crowding is None else left_crowding)[seg]
     segments = Segments(frame_id, p_c, direction_3d, length, score, np.ones(len(seg), np.int64),
                         {"sigma_depth_m": depth_per_disparity * sigma_d, "sigma_direction_rad": sigma_direction,
-                         "sigma_lateral_px": np.hypot(params.lateral_sigma_px,
-                                                      crowded_sigma(crowd, params.crowded_lateral_px, params)),
+                         "sigma_lateral_px": lateral_sigma(
+                             (crowding(left) if left_crowding is None else left_crowding)[seg], params),
                          "disparity_px": disparity_at(0.0), "u": center[:, 0], "v": center[:, 1]})
     sure = sigma_direction <= np.radians(params.end_max_direction_sigma_deg)
     return segments.select(sure), seg[sure]

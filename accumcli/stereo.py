@@ -517,7 +517,7 @@ def triangulate(left: Segments2D, right: Segments2D, m: Matches, intr: StereoInt
     crowd_left, crowd_right = crowd if crowd is not None else (crowding(left), crowding(right))
     crowd = np.minimum(crowd_left[m.left], crowd_right[m.right])
     sigma_d = np.hypot(sigma_d, crowded_sigma(crowd, params.crowded_disparity_px, params))
-    sigma_lateral = np.hypot(params.lateral_sigma_px, crowded_sigma(crowd, params.crowded_lateral_px, params))
+    sigma_lateral = lateral_sigma(crowd, params)
     depth_per_disparity = p_center[:, 2] ** 2 / (intr.fx * intr.baseline)
     sigma_depth = depth_per_disparity * sigma_d
     # direction: the fitted slope's uncertainty tilts the segment along the viewing ray
@@ -567,6 +567,11 @@ def crowded_sigma(crowd_px: np.ndarray, peak: float, params: StereoParams) -> np
     ``crowded_near_px`` or nearer, falling linearly to 0 at ``crowded_far_px``."""
     ramp = (params.crowded_far_px - crowd_px) / (params.crowded_far_px - params.crowded_near_px)
     return peak * np.clip(ramp, 0.0, 1.0)
+
+
+def lateral_sigma(crowd_px: np.ndarray, params: StereoParams) -> np.ndarray:
+    """(N,) px: how surely each piece lies across its line in the image, given its ``crowding`` (N,) px."""
+    return np.hypot(params.lateral_sigma_px, crowded_sigma(crowd_px, params.crowded_lateral_px, params))
 
 
 def stretch_ids(left: Segments2D, right: Segments2D, li: np.ndarray, ri: np.ndarray) -> np.ndarray:
