@@ -58,7 +58,7 @@ from .ncc_kernel import ends_on_lines, row_ncc
 from .lines2d import Gradients, Segments2D, parabola_peak, sample
 from .recording import StereoIntrinsics
 from .segments import Segments
-from .stereo import StereoParams, angle_from_rows, backproject, crowding, lateral_sigma
+from .stereo import StereoParams, angle_from_rows, backproject, lateral_sigma
 
 
 def _runs(left: Segments2D, index: np.ndarray, gap_px: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -162,13 +162,12 @@ def _interrupted(ends: np.ndarray, outward: np.ndarray, params: StereoParams) ->
 def triangulate_critical(left_img: np.ndarray, right_img: np.ndarray, left: Segments2D,
                          grads: tuple[Gradients, Gradients], intr: StereoIntrinsics, params: StereoParams,
                          frame_id: str, matched: Segments | None = None,
-                         matched_2d: Segments2D | None = None,
-                         left_crowding: np.ndarray | None = None) -> tuple[Segments, np.ndarray]:
+                         matched_2d: Segments2D | None = None, *,
+                         left_crowding: np.ndarray) -> tuple[Segments, np.ndarray]:
     """3D segments (left camera frame) of the critical left segments between two run ends whose
     disparity is known (module docstring), and the (K,) left segment indices they come from.
     ``matched``, ``matched_2d``: the frame's triangulated segments and their left 2D segments,
-    whose ends give junction disparities; ``left_crowding``: ``stereo.crowding`` of ``left``, if
-    the caller has it."""
+    whose ends give junction disparities; ``left_crowding``: ``stereo.crowding`` of ``left``."""
     critical = np.flatnonzero(angle_from_rows(left.directions) < params.critical_angle_deg)
     none = Segments.empty(frame_id), np.zeros(0, np.int64)
     if len(critical) == 0 or not params.critical_by_ends:
@@ -267,8 +266,7 @@ def triangulate_critical(left_img: np.ndarray, right_img: np.ndarray, left: Segm
     score = np.full(len(seg), params.end_min_ncc)
     segments = Segments(frame_id, p_c, direction_3d, length, score, np.ones(len(seg), np.int64),
                         {"sigma_depth_m": depth_per_disparity * sigma_d, "sigma_direction_rad": sigma_direction,
-                         "sigma_lateral_px": lateral_sigma(
-                             (crowding(left) if left_crowding is None else left_crowding)[seg], params),
+                         "sigma_lateral_px": lateral_sigma(left_crowding[seg], params),
                          "disparity_px": disparity_at(0.0), "u": center[:, 0], "v": center[:, 1]})
     sure = sigma_direction <= np.radians(params.end_max_direction_sigma_deg)
     return segments.select(sure), seg[sure]

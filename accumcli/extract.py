@@ -75,7 +75,7 @@ def extract_frame(frame: StereoFrame, params: ExtractParams = ExtractParams(), c
     t0 = times.add("triangulation", t0)
     by_ends, critical_left = triangulate_critical(frame.left, frame.right, left, tuple(grads), frame.intrinsics,
                                                   params.stereo, camera_frame, segments, left.select(m.left[kept]),
-                                                  crowd[0])
+                                                  left_crowding=crowd[0])
     times.add("critical", t0)
     # right_2d: what the detector found; right_found: what the right-image search added (``guided``)
     counts = {"left_2d": len(left), "right_2d": detected_right, "right_found": len(right) - detected_right,

@@ -401,7 +401,7 @@ def _plane_sigma(length_px: np.ndarray, p: LineModelParams, context: FrameContex
     line_sigma = p.line_sigma_px * np.sqrt(12.0 / np.maximum(length_px, 1.0)) / np.maximum(length_px, 1.0)
     pose_rotation = np.radians(p.pose_rotation_sigma_deg)
     if context is not None and context.pose_covariance is not None:
-        pose_rotation = max(pose_rotation, pose_sigmas(np.zeros((0, 3)), context.pose_covariance)[1])
+        pose_rotation = max(pose_rotation, pose_rotation_sigma(context.pose_covariance))
     return np.hypot(line_sigma, pose_rotation)
 
 
@@ -423,7 +423,13 @@ def pose_sigmas(centers: np.ndarray, covariance: np.ndarray) -> tuple[np.ndarray
     p = np.asarray(centers, float).reshape(-1, 3)
     J = np.concatenate([skew(p), np.broadcast_to(-np.eye(3), (len(p), 3, 3))], axis=2)     # (N, 3, 6)
     position = np.sqrt(np.einsum("nij,jk,nik->n", J, covariance, J) / 3)
-    return position, float(np.sqrt(np.trace(covariance[:3, :3]) / 3))
+    return position, pose_rotation_sigma(covariance)
+
+
+def pose_rotation_sigma(covariance: np.ndarray) -> float:
+    """rad: a pose's rotation sigma, the root mean square over three axes of its (6, 6) ``covariance``
+    (rotation first, as ``motion.fuse`` gives it)."""
+    return float(np.sqrt(np.trace(covariance[:3, :3]) / 3))
 
 
 def sigmas(segments: Segments) -> tuple[np.ndarray, np.ndarray] | None:

@@ -472,9 +472,9 @@ def backproject(u: np.ndarray, v: np.ndarray, d: np.ndarray, intr: StereoIntrins
 
 def triangulate(left: Segments2D, right: Segments2D, m: Matches, intr: StereoIntrinsics,
                 params: StereoParams, frame_id: str,
-                crowd: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[Segments, np.ndarray]:
+                crowd: tuple[np.ndarray, np.ndarray]) -> tuple[Segments, np.ndarray]:
     """3D local segments (left camera frame) of the matches, and the (K,) indices of ``m`` they come from.
-    ``crowd``: ``crowding`` of the left and the right segments, if the caller has it."""
+    ``crowd``: ``crowding`` of the left and of the right segments."""
     if len(m.left) == 0:
         return Segments.empty(frame_id), np.zeros(0, np.int64)
     if params.row_offset_px:   # a row offset dy moves an edge's crossing of a row by dy times its cotangent
@@ -519,8 +519,7 @@ def triangulate(left: Segments2D, right: Segments2D, m: Matches, intr: StereoInt
     sigma_d = np.where(fitted, np.maximum(sigma[stretch], 0.05) * np.sqrt(
         1.0 / np.maximum(count[stretch], 1) + (s - mean_s[stretch]) ** 2
         / np.maximum(spread[stretch] ** 2 / 3, 1e-9)), params.default_disparity_sigma_px)
-    crowd_left, crowd_right = crowd if crowd is not None else (crowding(left), crowding(right))
-    crowd = np.minimum(crowd_left[m.left], crowd_right[m.right])
+    crowd = np.minimum(crowd[0][m.left], crowd[1][m.right])
     sigma_d = np.hypot(sigma_d, crowded_sigma(crowd, params.crowded_disparity_px, params))
     sigma_lateral = lateral_sigma(crowd, params)
     depth_per_disparity = p_center[:, 2] ** 2 / (intr.fx * intr.baseline)
