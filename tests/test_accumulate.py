@@ -312,7 +312,8 @@ def test_static_evidence_adds_up_over_frames():
     (``static_evidence`` None) it is confirmed every frame."""
     background = np.array([[0.1, 0.05, 1.0]])      # camera frame
     first = transform_points(invert(_turning(0)), background)          # its model place (object frame)
-    for evidence, expected in ((0.5, [0.25, 0.625, 0.893, 0.53, 0.132]), (None, [0.25, 0.625, 0.893, 0.977, 0.995, 0.995])):
+    for evidence, expected in ((0.5, [0.25, 0.625, 0.893, 0.53, 0.132]),
+                               (None, [0.25, 0.625, 0.893, 0.977, 0.995, 0.995])):
         acc = Accumulator(PointType(), Points(np.zeros((0, 3)), np.zeros(0)), UpdateRule(static_evidence=evidence))
         confidence = []
         for k in range(6):
