@@ -30,7 +30,9 @@ by the known motion (the entity type's ``transform``):
    clipped to [-1, 1]; 1 where only the still place shows something, -1
    where only the model place does) to a sum kept since the entity's first
    observation, and once the sum exceeds ``static_evidence`` the entity is
-   contradicted in every frame that judges it. ``make suite`` (4 runs a row,
+   contradicted in every frame that judges it (the sum is never reset: only
+   frames that show it at its model place and not at its still place take it
+   back down). ``make suite`` (4 runs a row,
    2026-12-07) against the single-frame test alone: every simulated and
    devset row the same to the digit; on the real teabox the share of the
    accepted length that ``accum check`` finds staying still in view 0.083 ->
@@ -398,8 +400,9 @@ class Accumulator(Generic[E]):
 
     def _consolidate(self, i: np.ndarray, j: np.ndarray, rounds: int = 3, same=None) -> int:
         """Merge model entities (candidate pairs i, j) that the entity type deems the same:
-        the more confident one absorbs the other, keeping the larger confidence
-        and the sum of observations. Without this, a duplicate would take the
+        the more confident one absorbs the other, keeping the larger confidence, the sum of
+        observations and the larger static evidence (``static_sum``: either having looked still is
+        reason to suspect the one thing they are). Without this, a duplicate would take the
         observations of the entity it doubles (merging is one-to-one) and both
         would be punished in turn. Candidates are the entities that corresponded
         to one observation: only those can have become duplicates (a new entity

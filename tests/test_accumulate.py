@@ -326,6 +326,23 @@ def test_static_evidence_adds_up_over_frames():
         assert confidence == expected, (evidence, confidence)
 
 
+def test_an_object_point_gathers_evidence_against_being_static():
+    """A point of the turning object, seen every frame where the object takes it and never where it
+    would stay still: each frame after its first takes its sum down by 1 (-5 after six frames). A frame
+    that then shows something exactly at its still place and the point only 0.4 mm off its model place
+    (the distractor of the test above) adds 0.2 and contradicts nothing, where a new entity's sum would
+    pass 0.5 in three such frames."""
+    acc = Accumulator(PointType(), Points(np.zeros((0, 3)), np.zeros(0)), UpdateRule())
+    point = np.array([[0.03, 0.0, 0.0]])                                  # object frame
+    for k in range(6):
+        acc.update(Points(transform_points(_turning(k), point), np.ones(1)), invert(_turning(k)))
+    assert len(acc) == 1 and acc.static_sum.tolist() == [-5.0] and acc.confidence[0] > 0.99
+    still = transform_points(_turning(0), point)                           # camera frame, as first seen
+    beside = transform_points(_turning(6), point + [0.0004, 0.0, 0.0])
+    stats = acc.update(Points(np.vstack([still, beside]), np.r_[1.0, 1e-9]), invert(_turning(6)))
+    assert stats.contradicted == 0 and abs(acc.static_sum[0] + 4.8) < 1e-9
+
+
 def test_an_object_that_does_not_move_is_not_contradicted():
     """Where the object has not moved since an entity's first observation, static and object-fixed
     predict the same place: the frame cannot tell, the entity is confirmed as usual."""
@@ -492,12 +509,13 @@ def test_duplicates_merge_in_disjoint_pairs_and_keep_every_observation():
         core.entities = kind.concatenate(kind.empty("object"), kind.observe(copies, context))
         core.log_odds, core.observations = np.array(log_odds), np.array([3, 5, 7])
         core.views, core.last_confirmed = np.array([4, 6, 8]), np.zeros(3, np.int64)
-        core.static_sum = np.zeros(3)
+        core.static_sum = np.array([-3.0, 0.4, -1.0])
         i, j = _sharing(np.array([0, 1, 2]), np.array([0, 0, 0]))
         merged = core._consolidate(i, j)
         live = np.isfinite(core.log_odds)
         assert merged == 2 and live.sum() == 1
         assert core.observations[live].sum() == 15 and core.entities.extra["weight"][live].sum() == 3
+        assert core.static_sum[live] == [0.4]     # the larger evidence of looking still
 
 
 def test_disjoint_pairs_share_no_entity_on_either_side():
