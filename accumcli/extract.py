@@ -70,7 +70,8 @@ def extract_frame(frame: StereoFrame, params: ExtractParams = ExtractParams(), c
     m, right = guided_matches(frame.left, frame.right, left, right, m, grads[1], frame.intrinsics, params.stereo,
                               params.guided)
     t0 = times.add("matching", t0)
-    crowd = crowding(left), crowding(right)     # once: triangulation and the critical pieces take it
+    # once: triangulation and the critical pieces take it; beyond crowded_far_px it widens no sigma
+    crowd = crowding(left, params.stereo.crowded_far_px), crowding(right, params.stereo.crowded_far_px)
     segments, kept = triangulate(left, right, m, frame.intrinsics, params.stereo, camera_frame, crowd)
     t0 = times.add("triangulation", t0)
     by_ends, critical_left = triangulate_critical(frame.left, frame.right, left, tuple(grads), frame.intrinsics,

@@ -104,7 +104,7 @@ from .lines2d import Gradients, Segments2D
 from .metric import MetricThresholds, candidate_pairs, d_o, d_p, pair_costs
 from .recording import StereoIntrinsics
 from .segments import Segments, concatenate
-from .stereo import view_plane_normals
+from .stereo import StereoParams, view_plane_normals
 from .visibility import in_both_images
 
 
@@ -118,7 +118,7 @@ RUNNING_SUMS = ("info", "info_vec", "dir_sum", "weight", "inv_var_position", "in
 @dataclass(frozen=True)
 class LineModelParams:
     thresholds: MetricThresholds = MetricThresholds()
-    lateral_sigma_px: float = 0.3           # px, of observations that carry no sigma_lateral_px (``stereo``)
+    lateral_sigma_px: float = StereoParams.lateral_sigma_px   # px, of observations without sigma_lateral_px
     max_weight: float = 20.0
     aspect_margin_deg: float = 15.0
     critical_angle_deg: float = 8.0   # AccumulateParams sets it to StereoParams.critical_angle_deg

@@ -519,9 +519,9 @@ def triangulate(left: Segments2D, right: Segments2D, m: Matches, intr: StereoInt
     sigma_d = np.where(fitted, np.maximum(sigma[stretch], 0.05) * np.sqrt(
         1.0 / np.maximum(count[stretch], 1) + (s - mean_s[stretch]) ** 2
         / np.maximum(spread[stretch] ** 2 / 3, 1e-9)), params.default_disparity_sigma_px)
-    crowd = np.minimum(crowd[0][m.left], crowd[1][m.right])
-    sigma_d = np.hypot(sigma_d, crowded_sigma(crowd, params.crowded_disparity_px, params))
-    sigma_lateral = lateral_sigma(crowd, params)
+    beside = np.minimum(crowd[0][m.left], crowd[1][m.right])     # px, the nearer of the pair's neighbours
+    sigma_d = np.hypot(sigma_d, crowded_sigma(beside, params.crowded_disparity_px, params))
+    sigma_lateral = lateral_sigma(beside, params)
     depth_per_disparity = p_center[:, 2] ** 2 / (intr.fx * intr.baseline)
     sigma_depth = depth_per_disparity * sigma_d
     # direction: the fitted slope's uncertainty tilts the segment along the viewing ray

@@ -56,12 +56,13 @@ def score(seed: int, repeats: int = 1) -> dict:
         out[key] = tuple(np.mean([r[key] for r in runs], axis=0))
     out["exact_sd"] = float(np.max(np.std([r["exact"] for r in runs], axis=0)))
     for name in ("tracked", *PERTURBED):
-        out[f"{name}_shortfall"] = max(out["exact"][0] - out[name][0], out["exact"][1] - out[name][1])
-    # the tracked shortfall's standard error: of the runs' paired differences (each run's exact and
-    # tracked models share its noise pattern), in the figure (precision or completeness) that sets it
-    figure = int(np.argmax(np.subtract(out["exact"], out["tracked"])))
-    differences = [r["exact"][figure] - r["tracked"][figure] for r in runs]
-    out["tracked_se"] = float(np.std(differences, ddof=1) / np.sqrt(repeats)) if repeats > 1 else float("nan")
+        # (runs, 2): each run's shortfall in precision and completeness; their mean is that of the means
+        differences = np.array([np.subtract(r["exact"], r[name]) for r in runs])
+        figure = int(np.argmax(differences.mean(axis=0)))       # the figure that sets the shortfall
+        out[f"{name}_shortfall"] = float(differences[:, figure].mean())
+        # its standard error, of paired differences: each run's two models share its noise pattern
+        out[f"{name}_se"] = float(np.std(differences[:, figure], ddof=1) / np.sqrt(repeats)) if repeats > 1 \
+            else float("nan")
     return out
 
 
