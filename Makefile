@@ -55,7 +55,7 @@ suite: $(VENV)/.installed
 	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python benchmarks/suite.py
 	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python benchmarks/track_suite.py
 
-# Are the extracted segments' depth and direction sigmas honest? Errors against truth per sigma bin (after make suite), and single-frame direction errors by how pieces were triangulated (devset).
+# Are the extracted segments' depth and direction sigmas honest? Errors against truth per sigma bin (after make suite), single-frame direction errors by how pieces were triangulated, and the 2D lines' angle errors by span (devset).
 .PHONY: uncertainty
 uncertainty: $(VENV)/.installed
 	$(BIN)/python benchmarks/uncertainty.py

@@ -10,6 +10,10 @@ and this says which pieces make it: with an 8 cm baseline at 0.55-0.8 m the two 
 line meet at a few degrees, so the depth tilt of a piece alone on its stretch is its lines' angle
 error times about ten.
 
+A third table: the angle error of the 2D lines themselves (each piece's left and right line against
+the projection of its edge in that image, by the line's span): how sure the back-projected planes are
+(``stereo``'s plane sigma, compared in the last column), and so what limits a lone piece's tilt.
+
 A second table: the disparity error of the same pieces (px: the piece's disparity against the one of
 the point where its centre's viewing ray passes nearest the edge), by the left piece's angle to the
 image rows, against the sigma the piece claims (``sigma_depth_m`` in disparity): is the depth
@@ -32,11 +36,13 @@ DEVSET = ROOT.parent / "shared" / "data" / "devset"
 NEAR_M = 0.004
 SPAN_BINS_PX = (0, 15, 25, 40, 10_000)
 ANGLE_BINS_DEG = (0, 12, 20, 30, 50, 91)
+LINE_SPAN_BINS_PX = (0, 15, 20, 27, 35, 50, 10_000)
 
 
 def pieces(recording: Path, truth_file: Path) -> np.ndarray:
-    """(N, 6): direction error deg, stretch size, line span px, disparity error px, claimed disparity
-    sigma px, the left piece's angle to the image rows deg, of the on-edge non-critical pieces."""
+    """(N, 10): direction error deg, stretch size, line span px, disparity error px, claimed disparity
+    sigma px, the left piece's angle to the image rows deg, the left and right lines' angle errors deg
+    (signed, against the edge's projection) and spans px, of the on-edge non-critical pieces."""
     from accumcli.evaluate import _point_edge_distance
     from accumcli.extract import extract_frame
     from accumcli.geometry import invert, transform_points
@@ -70,9 +76,26 @@ def pieces(recording: Path, truth_file: Path) -> np.ndarray:
             disparity_error = camera.extra["disparity_px"] - fB / depth
             claimed = camera.extra["sigma_depth_m"] * fB / camera.centers[:, 2] ** 2
             angle = np.degrees(np.arcsin(np.clip(np.abs(left.directions[li, 1]), 0, 1)))
+            a, b = transform_points(T, truth.a[nearest]), transform_points(T, truth.b[nearest])
+            line_errors = [_angle_error(side.line_direction[index], a, b, frame.intrinsics, shift)
+                           for side, index, shift in ((left, li, 0.0), (right, ri, 1.0))]
             rows.append(np.column_stack([error, size, np.minimum(line_span(left, li), line_span(right, ri)),
-                                         disparity_error, claimed, angle])[near])
-    return np.concatenate(rows) if rows else np.zeros((0, 6))
+                                         disparity_error, claimed, angle, *line_errors, line_span(left, li),
+                                         line_span(right, ri)])[near])
+    return np.concatenate(rows) if rows else np.zeros((0, 10))
+
+
+def _angle_error(direction: np.ndarray, a: np.ndarray, b: np.ndarray, intr, right: float) -> np.ndarray:
+    """(N,) deg, signed: the image lines' ``direction`` (N, 2) against the projection of the edges a, b
+    (N, 3, camera frame) in the left image (``right`` 0) or the right one (1); nan where an end is
+    behind the camera."""
+    def project(p):
+        z = np.where(p[:, 2] > 1e-6, p[:, 2], np.nan)
+        return np.column_stack([intr.fx * (p[:, 0] - right * intr.baseline) / z + intr.cx, intr.fy * p[:, 1] / z + intr.cy])
+    edge = project(b) - project(a)
+    edge /= np.linalg.norm(edge, axis=1, keepdims=True)
+    cross = direction[:, 0] * edge[:, 1] - direction[:, 1] * edge[:, 0]
+    return np.degrees(np.arcsin(np.clip(cross * np.sign(np.sum(direction * edge, axis=1)), -1, 1)))
 
 
 def _depth_on_edge(centers: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -110,6 +133,25 @@ def main() -> int:
             if len(rows):
                 print(f"| {label} | {lo}-{hi} | {len(rows)} | {1.4826 * np.median(np.abs(rows[:, 3])):.3f} | "
                       f"{np.percentile(np.abs(rows[:, 3]), 90):.3f} | {np.median(rows[:, 4]):.3f} |")
+    print("\n| image | line span px | count | angle error deg (1.4826 x median abs. deviation) | 90 % of abs error | "
+          "stereo's plane sigma deg |\n|---|---|---|---|---|---|")
+    from accumcli.stereo import StereoParams
+
+    params = StereoParams()
+    for label, error, span in (("left", e[:, 6], e[:, 8]), ("right", e[:, 7], e[:, 9])):
+        for lo, hi in zip(LINE_SPAN_BINS_PX, LINE_SPAN_BINS_PX[1:]):
+            chosen = (span >= lo) & (span < hi) & np.isfinite(error)
+            rows = error[chosen]
+            if len(rows):   # the plane sigma that stereo claims at the bin's median span
+                claimed = max(params.plane_sigma_deg,
+                              np.degrees(params.line_fit_sigma_px * np.sqrt(12) / max(np.median(span[chosen]), 1.0)))
+                print(f"| {label} | {lo}-{hi if hi < LINE_SPAN_BINS_PX[-1] else ''} | {len(rows)} | "
+                      f"{1.4826 * np.median(np.abs(rows - np.median(rows))):.2f} | {np.percentile(np.abs(rows), 90):.2f} | "
+                      f"{claimed:.2f} |")
+    off = e[:, 0] > 10
+    difference = np.abs(e[:, 6] - e[:, 7])
+    print(f"\nthe left and right lines' angle errors differ by a median of {np.nanmedian(difference[off]):.2f} deg "
+          f"for the pieces more than 10 deg off in 3D, {np.nanmedian(difference[~off]):.2f} for the others")
     return 0
 
 
