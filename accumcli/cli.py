@@ -393,14 +393,20 @@ def extract(recording, output, rrd, with_2d, workers, frames, extract_params, op
                    "one and their own direction lies near it (the edges of made objects share a few directions; "
                    "the running accumulation's counts, as --history writes them, do not count the held ones it "
                    "accepts); --own-directions keeps their own.")
+@click.option("--image-confirm/--no-image-confirm", default=False, show_default=True,
+              help="A segment that a frame's 3D segments do not confirm, but whose edge both images show where the "
+                   "motion moved it, seen from a new aspect, gains half a confirmation: fuller models where the "
+                   "poses are exact to a few tenths of a pixel (simulated, or a precise robot); off by default: "
+                   "with poses a degree off it finds nothing, and tracking with its fuller models was less safe "
+                   "(README).")
 @box_option
 @frame_workers_option
 @frames_option
 @extraction_options
 @recording_options
 def accumulate(recording, outputs, ply_all, rrd, truth, history, plot, png, panel, motion, poses, position_threshold,
-               angle_threshold, view_planes, plane_agreement, merge_twins, dominant_directions, box, workers, frames,
-               extract_params, options):
+               angle_threshold, view_planes, plane_agreement, merge_twins, dominant_directions, image_confirm, box,
+               workers, frames, extract_params, options):
     """Accumulate a model of the object over the recording, with the gripper's known motion.
 
     \b
@@ -408,6 +414,7 @@ def accumulate(recording, outputs, ply_all, rrd, truth, history, plot, png, pane
       accum accumulate sample_data/sim_box.mcap -o out/model.json -o out/model.ply --rrd out/run.rrd
       accum accumulate sample_data/chessboard/chessboard.mcap --object-frame board -o out/board.json
     """
+    from .accumulate import IMAGE_CONFIRMATION, UpdateRule
     from .dominant_directions import DominantParams
     from .line_model import LineModelParams
     from .metric import MetricThresholds
@@ -424,7 +431,8 @@ def accumulate(recording, outputs, ply_all, rrd, truth, history, plot, png, pane
                                  view_planes=view_planes, plane_agreement=plane_agreement,
                                  merge_twins=merge_twins,
                                  dominant=DominantParams() if dominant_directions else None)
-    params = AccumulateParams(extract=extract_params, line_model=line_model, motion=motion, box=box)
+    rule = UpdateRule(image_confirmation=IMAGE_CONFIRMATION if image_confirm else None)
+    params = AccumulateParams(extract=extract_params, line_model=line_model, rule=rule, motion=motion, box=box)
     result = run_with_progress("accumulating", accumulate_recording, recording, outputs, params=params,
                                options=options, frames=frames, truth=truth, history=history, plot=plot, rrd=rrd,
                                png=png, panel=panel, ply_all=ply_all, poses=poses, workers=workers)

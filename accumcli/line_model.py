@@ -98,6 +98,7 @@ from scipy.spatial import cKDTree
 
 from .dominant_directions import DominantParams, covered, dominant_directions, observations_directed
 from .edge_evidence import edge_evidence
+from .edge_search import edge_candidates
 from .geometry import check_points, check_transform, invert, outer, skew, transform_points, unit_or_zero
 from .grouping import best_per_key
 from .lines2d import Gradients, Segments2D
@@ -105,7 +106,7 @@ from .metric import MetricThresholds, candidate_pairs, d_o, d_p, pair_costs
 from .recording import StereoIntrinsics
 from .segments import Segments, concatenate
 from .stereo import StereoParams, view_plane_normals
-from .visibility import in_both_images
+from .visibility import MIN_DEPTH_M, in_both_images
 
 
 
@@ -113,6 +114,13 @@ from .visibility import in_both_images
 OBSERVATION_ONLY = ("view_normal", "view_sigma")
 # the entity's sums that an observation adds to, scaled down together at ``max_weight`` (``dir_info``: view planes)
 RUNNING_SUMS = ("info", "info_vec", "dir_sum", "weight", "inv_var_position", "inv_var_direction", "dir_info")
+# ``image_confirmed``'s search (the tracker's: ``edge_search``): points along a segment, px searched across it
+# each way, and what counts as its edge there (grey levels per pixel across it, and the share of the gradient
+# that lies across it)
+IMAGE_SAMPLES = 9
+IMAGE_SEARCH_PX = 3
+IMAGE_MIN_GRADIENT = 4.0
+IMAGE_MIN_COS = 0.85
 
 
 @dataclass(frozen=True)
@@ -147,6 +155,9 @@ class LineModelParams:
     twin_plane_agreement: float = 0.01  # ... whose planes together meet on one line (``direction_known``'s ratio) ...
     twin_min_view_deg: float = 5.0    # ... seen together from views spanning at least this
     dominant: DominantParams | None = DominantParams()  # held directions from the model's shared ones (None: off)
+    image_tolerance_px: float = 0.4   # ``image_confirmed``: the edge found this near the projection ...
+    image_share: float = 0.7          # ... at this share of the points along the segment, in both images ...
+    image_shift_px: float = 2.0       # ... where its still place projects this far across it
 
 
 @dataclass
@@ -165,6 +176,7 @@ class FrameContext:
     extracted_left: Segments2D | None = None  # the left pieces that gave this frame's 3D segments
     shared: Segments | None = None    # the model's accepted segments seen from more than one aspect (``shared_directions``)
     pose_covariance: np.ndarray | None = None   # (6, 6) of the pose (``motion.fuse``); None: exact (``pose_sigmas``)
+    right_gradients: Gradients | None = None  # the right image's (``image_confirmed``; None: no such test)
 
     def __post_init__(self):
         self.T_camera_object = check_transform(self.T_camera_object, "T_camera_object")
@@ -350,6 +362,55 @@ class LineSegmentType:
         lengths = model.lengths
         lengths[mi] = hi - lo
         return Segments(model.frame_id, centers, directions, lengths, model.confidence, model.observations, extra)
+
+    def image_confirmed(self, model: Segments, still: Segments, context: FrameContext,
+                        candidates: np.ndarray) -> np.ndarray:
+        """(N,) bool: of the ``candidates`` (N,) bool, the model segments whose edge both images show where
+        this frame's pose projects them, seen from a new aspect (``accumulate``, step 4): at
+        ``IMAGE_SAMPLES`` points along the middle 80 % of the segment, the strongest gradient across it within
+        ``IMAGE_SEARCH_PX`` (the tracker's ``edge_search``) lies within ``image_tolerance_px`` of the
+        projection at ``image_share`` of them, in the left and in the right image. Judged only where (1)
+        the segment's first observation held still in the sensor's frame (``still`` (N,), model frame)
+        projects ``image_shift_px`` or more across it (a static edge would show as well, and along its own
+        line a static line shows the same), and (2) the frame sees it from more than ``view_step_deg`` from
+        every stored view (from one aspect the images repeat the plane that one stereo pair saw, whatever
+        the segment's tilt in depth: a new aspect tests its 3D place and direction). Needs the frame's
+        gradients of both images (``FrameContext``); without them, none."""
+        out = np.zeros(len(model), bool)
+        if context.left_gradients is None or context.right_gradients is None or not candidates.any():
+            return out
+        p, intr, T = self.params, context.intrinsics, context.T_camera_object
+        k = np.flatnonzero(candidates)
+        to_camera = invert(T)[:3, 3] - model.centers[k]
+        to_camera /= np.maximum(np.linalg.norm(to_camera, axis=1, keepdims=True), 1e-12)
+        new_aspect = np.einsum("nkj,nj->nk", model.extra["views"][k], to_camera).max(axis=1) <= \
+            np.cos(np.radians(p.view_step_deg))
+        k = k[new_aspect]
+        along = np.linspace(-0.4, 0.4, IMAGE_SAMPLES)[None, :, None] * model.lengths[k, None, None]
+        points = transform_points(T, (model.centers[k, None, :] + along * model.directions[k, None, :]).reshape(-1, 3))
+        points = points.reshape(len(k), IMAGE_SAMPLES, 3)
+        z = points[..., 2]
+        front = (z > MIN_DEPTH_M).all(axis=1)
+        z = np.where(front[:, None], z, 1.0)
+        u_left, v = intr.fx * points[..., 0] / z + intr.cx, intr.fy * points[..., 1] / z + intr.cy
+        u_right = u_left - intr.fx * intr.baseline / z
+        reach = IMAGE_SEARCH_PX + 1
+        inside = front & (v.min(axis=1) >= reach) & (v.max(axis=1) <= intr.height - 1 - reach)
+        for u in (u_left, u_right):
+            inside &= (u.min(axis=1) >= reach) & (u.max(axis=1) <= intr.width - 1 - reach)
+        line = np.column_stack([u_left[:, -1] - u_left[:, 0], v[:, -1] - v[:, 0]])
+        normal = np.column_stack([-line[:, 1], line[:, 0]]) / np.maximum(np.linalg.norm(line, axis=1, keepdims=True), 1e-12)
+        still_uv = intr.project(transform_points(T, still.centers[k]))[0]
+        middle = np.column_stack([u_left[:, IMAGE_SAMPLES // 2], v[:, IMAGE_SAMPLES // 2]])
+        judged = np.flatnonzero(inside & (np.abs(np.sum((still_uv - middle) * normal, axis=1)) >= p.image_shift_px))
+        ok = np.ones(len(judged), bool)
+        normals = np.ascontiguousarray(np.repeat(normal[judged], IMAGE_SAMPLES, axis=0))
+        for grads, u in ((context.left_gradients, u_left), (context.right_gradients, u_right)):
+            uv = np.ascontiguousarray(np.stack([u[judged], v[judged]], axis=-1).reshape(-1, 2), np.float64)
+            found = edge_candidates(grads.gxy, uv, normals, IMAGE_SEARCH_PX, IMAGE_MIN_GRADIENT, IMAGE_MIN_COS, 1)[:, 0]
+            ok &= (np.abs(found) <= p.image_tolerance_px).reshape(len(judged), IMAGE_SAMPLES).mean(axis=1) >= p.image_share
+        out[k[judged[ok]]] = True
+        return out
 
     def expected(self, model: Segments, context: FrameContext, confirmed: np.ndarray | None = None) -> np.ndarray:
         """(N,) bool: the frame should have shown these model segments (see the module docstring); the

@@ -144,7 +144,7 @@ class LineAccumulation:
             T_camera_object, estimate = self._refined(frame, T_camera_object, extraction)
         context = FrameContext(T_camera_object, frame.intrinsics, frame.border_distance,
                                *self._miss_test_inputs(frame, extraction), shared=self._shared,
-                               pose_covariance=pose_covariance)
+                               pose_covariance=pose_covariance, right_gradients=self._right_gradients(frame, extraction))
         segments = extraction.segments
         if self.params.box is not None:
             segments = segments.select(inside_box(transform_points(invert(T_camera_object), segments.centers),
@@ -179,6 +179,16 @@ class LineAccumulation:
             frame.left, self.params.extract.lines,
             border_distance=frame.border_distance[0] if frame.border_distance is not None else None)
         return gradients, extraction.left.select(extraction.left_index)
+
+    def _right_gradients(self, frame: StereoFrame, extraction: FrameSegments) -> Gradients | None:
+        """The right image's gradients for ``image_confirmed`` (None where ``image_confirmation`` is off): the
+        extraction's, or computed again where a helper process or a replay dropped them."""
+        if self.params.rule.image_confirmation is None:
+            return None
+        if extraction.gradients is not None:
+            return extraction.gradients[1]
+        return Gradients.of(frame.right, self.params.extract.lines,
+                            border_distance=frame.border_distance[1] if frame.border_distance is not None else None)
 
     def _written(self, uncertainty: bool = True) -> Segments:
         """The core's segments as ``to_model`` writes them, with this run's acceptance rules (its twins

@@ -27,13 +27,15 @@ def recording(name: str, **options) -> str:
     return str(path)
 
 
-def accumulate_params(view_planes: bool = True, motion: str = "gripper"):
+def accumulate_params(view_planes: bool = True, motion: str = "gripper", image_confirm: bool = False):
     """The accumulation parameters of the scoreboards: the defaults, or ``accum accumulate
-    --average-directions`` and / or ``--motion tracked``."""
+    --average-directions``, ``--motion tracked`` and / or ``--image-confirm``."""
+    from accumcli.accumulate import IMAGE_CONFIRMATION, UpdateRule
     from accumcli.line_model import LineModelParams
     from accumcli.pipeline import AccumulateParams
 
-    return AccumulateParams(line_model=LineModelParams(view_planes=view_planes), motion=motion)
+    return AccumulateParams(line_model=LineModelParams(view_planes=view_planes), motion=motion,
+                            rule=UpdateRule(image_confirmation=IMAGE_CONFIRMATION if image_confirm else None))
 
 
 def run_child(code: str) -> dict:

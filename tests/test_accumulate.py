@@ -645,3 +645,70 @@ def test_the_written_model_merges_twins_unless_told_not_to():
         acc = LineAccumulation(AccumulateParams(line_model=LineModelParams(merge_twins=merge)))
         acc.core = _twin_core(acc.entity_type, (0.0, 40.0), (0.0, 0.002), (0.6, 0.3))
         assert len(acc.model()) == expected and len(acc.core) == 2
+
+
+def _step_images(u_left: float, z: float) -> tuple[Gradients, Gradients]:
+    """Gradients of a stereo pair showing one vertical step edge at ``u_left`` px (area-sampled, so its
+    place is sub-pixel) at depth ``z`` m (the right image's edge at its disparity)."""
+    columns = np.arange(640, dtype=float)
+
+    def image(u):
+        return np.repeat((60 + 120 * np.clip(columns + 0.5 - u, 0, 1))[None, :], 480, axis=0).astype(np.uint8)
+
+    return Gradients.of(image(u_left)), Gradients.of(image(u_left - INTR.fx * INTR.baseline / z))
+
+
+def _turned(deg: float, shift) -> np.ndarray:
+    """T_camera_object: the object 0.5 m in front, turned by ``deg`` about its y axis, moved by ``shift`` m."""
+    return make_transform(Rotation.from_rotvec([0.0, np.radians(deg), 0.0]).as_matrix(), np.add([0.0, 0.0, 0.5], shift))
+
+
+def test_images_confirm_a_segment_where_it_moved_only_if_right_in_3d_and_seen_from_a_new_aspect():
+    """An edge along y through the object's origin, first seen at T0; in a frame turned by 12 degrees
+    about y and moved 10 mm across (x) both images show it where it moved. A segment on it is
+    confirmed; one tilted 15 degrees in depth within the first view's plane (which that view could
+    not tell apart) projects off the edge from the new aspect and is not; neither where the images
+    show the edge at the first observation's still place (static), nor from the first aspect, nor
+    where the object moved along the line only (a static line would look the same)."""
+    kind = LineSegmentType()
+    T0 = _turned(0.0, [0.0, 0.0, 0.0])
+    tilt = np.radians(15.0)
+    first = Segments("gripper", np.zeros((2, 3)), np.array([[0.0, 1.0, 0.0], [0.0, np.cos(tilt), np.sin(tilt)]]),
+                     np.array([0.04, 0.04]), np.array([0.9, 0.9]), np.ones(2, np.int64),
+                     {"sigma_depth_m": np.array([0.001, 0.001])})
+    model = kind.observe(first, FrameContext(T0, INTR))
+    sensed = first.transformed(T0, "camera_left")        # the first observation, held still in the camera
+
+    def confirmed(T, u_edge):
+        left, right = _step_images(u_edge, 0.5)
+        still = sensed.transformed(invert(T), "gripper")
+        return kind.image_confirmed(model, still, FrameContext(T, INTR, left_gradients=left, right_gradients=right),
+                                    np.ones(2, bool))
+
+    T1 = _turned(12.0, [0.01, 0.0, 0.0])
+    moved_u = INTR.fx * 0.01 / 0.5 + INTR.cx
+    assert confirmed(T1, moved_u).tolist() == [True, False]
+    assert confirmed(T1, INTR.cx).tolist() == [False, False]            # the edge stayed where it was first seen
+    assert confirmed(_turned(0.0, [0.01, 0.0, 0.0]), moved_u).tolist() == [False, False]   # the first aspect
+    assert confirmed(_turned(12.0, [0.0, 0.01, 0.0]), INTR.cx).tolist() == [False, False]  # moved along it
+
+
+def test_an_image_confirmation_raises_an_unconfirmed_segment_only_when_switched_on():
+    """A segment seen once and then not extracted again, in a frame whose images show it where it
+    moved from a new aspect: with ``image_confirmation`` its log-odds rise by that much, without
+    (the default) a miss of a segment not yet found again costs nothing."""
+    T0, T1 = _turned(0.0, [0.0, 0.0, 0.0]), _turned(12.0, [0.01, 0.0, 0.0])
+    left, right = _step_images(INTR.fx * 0.01 / 0.5 + INTR.cx, 0.5)
+    observed = Segments("gripper", np.zeros((1, 3)), np.array([[0.0, 1.0, 0.0]]), np.array([0.04]), np.array([0.9]),
+                        np.ones(1, np.int64), {"sigma_depth_m": np.array([0.001])}).transformed(T0, "camera_left")
+    rises = {}
+    for rule in (UpdateRule(), UpdateRule(image_confirmation=0.6)):
+        kind = LineSegmentType()
+        core = Accumulator(kind, kind.empty("camera_left"), rule)
+        core.update(observed, invert(T0), FrameContext(T0, INTR))
+        before = float(core.log_odds[0])
+        stats = core.update(Segments.empty("camera_left"), invert(T1),
+                            FrameContext(T1, INTR, left_gradients=left, right_gradients=right))
+        rises[rule.image_confirmation] = (float(core.log_odds[0]) - before, stats.image_confirmed)
+    assert rises[None] == (0.0, 0)
+    assert abs(rises[0.6][0] - 0.6) < 1e-12 and rises[0.6][1] == 1
