@@ -82,23 +82,30 @@ by the known motion (the entity type's ``transform``):
    Beyond the paper, off by default (``image_confirmation``, ``accum accumulate --image-confirm``):
    an entity that no observation confirmed but whose place the frame's images show (the entity
    type's ``image_confirmed``: for line segments, the edge in both images where the motion moved it,
-   from a new aspect, where the object moved across it since its first observation) gains
-   ``image_confirmation`` (``IMAGE_CONFIRMATION``, 0.6: a new entity needs two such frames, or one and
-   an observation) instead of being missed. Why: the frames' 3D segments, not the accumulation, limit
-   completeness (``make suite``: the model covers about what single frames got right twice), and a short
-   edge's later pieces are often tilted in depth past the metric's gate, though the images show the edge
-   where the segment projects. The images judge a segment's 3D place only from another aspect (from the
-   first one they repeat its plane whatever its tilt) and only where its still place projects elsewhere.
-   Measured (``benchmarks/suite.py --image-confirm``, 4 runs a row, 2026-12-08): see the README
-   (completeness higher on 17 of 19 rows; precision a little lower; with poses a degree off, as the real
-   teabox's, it finds nothing). Off by default because tracking with its fuller models was less safe:
-   the tracking scoreboard's sim_201 tracked a frame 10.3 mm off (``benchmarks/track_suite.py
-   --image-confirm``). Measured on three rows (completeness / precision): a tolerance of 0.6 px instead
-   of 0.4 (``LineModelParams.image_tolerance_px``) dev_cube_small 0.474 / 0.896 and sim_104 0.840 /
-   0.966 against 0.470 / 0.919 and 0.838 / 0.974; with that tolerance, 1.2 instead of 0.6 accepted
-   entities seen once and shown once (dev_cube_small 0.495 / 0.826), and with it, without the
-   new-aspect test sim_104 0.842 / 0.911, storing the aspects the images confirmed as views 0.841 /
-   0.923 (the views also decide which directions count as pinned).
+   from a new aspect, where the object moved across it since its first observation, so it needs the
+   first observations that step 2 keeps, i.e. ``static_margin``) gains ``image_confirmation``
+   (``IMAGE_CONFIRMATION``, 0.6 against a confirmation's 1.61: a new entity that no observation
+   confirms needs two such frames) instead of a miss, and counts as confirmed for the
+   ``tentative_frames`` bound (an entity the images keep showing is not stale; for line segments
+   that frame also gives it no planes of unmatched left pieces, which ``pipeline`` looks for only where
+   no frame confirmed an entity). Why: the frames' 3D
+   segments, not the accumulation, limit completeness (``make suite``: the model covers about what
+   single frames got right twice), and a short edge's later pieces are often tilted in depth past the
+   metric's gate, though the images show the edge where the segment projects. The images judge a
+   segment's 3D place only from another aspect (from the first one they repeat its plane whatever its
+   tilt) and only where its still place projects elsewhere. Never with poses refined on the same
+   images (``--motion tracked``): those put the model on the images' edges. Measured
+   (``benchmarks/suite.py --image-confirm``, 4 runs a row, 2026-12-08; the README has the rows):
+   completeness higher on 16 of 19 rows, precision a little lower; with poses a degree off, as the
+   real teabox's, it finds nothing. Off by default because tracking with its fuller models was less
+   safe: the tracking scoreboard's sim_201 tracked a frame 10.3 mm off (``benchmarks/track_suite.py
+   --image-confirm``). Measured with its first form (README) on dev_cube_small and sim_104
+   (completeness / precision): a tolerance
+   of 0.6 px instead of 0.4 (``LineModelParams.image_tolerance_px``) 0.474 / 0.896 and 0.840 / 0.966
+   against 0.470 / 0.919 and 0.838 / 0.974; with that tolerance, 1.2 instead of 0.6 accepted entities
+   seen once and shown once (dev_cube_small 0.495 / 0.826), and with it, without the new-aspect test
+   sim_104 0.842 / 0.911, storing the aspects the images confirmed as views 0.841 / 0.923 (the views
+   also decide which directions count as pinned).
 5. Model entities that duplicate each other (the entity type's ``same``) are
    merged: they would otherwise compete for the same observations.
 6. Unmatched observations join the model with confidence ``initial``.

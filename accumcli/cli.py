@@ -395,10 +395,10 @@ def extract(recording, output, rrd, with_2d, workers, frames, extract_params, op
                    "accepts); --own-directions keeps their own.")
 @click.option("--image-confirm/--no-image-confirm", default=False, show_default=True,
               help="A segment that a frame's 3D segments do not confirm, but whose edge both images show where the "
-                   "motion moved it, seen from a new aspect, gains half a confirmation: fuller models where the "
-                   "poses are exact to a few tenths of a pixel (simulated, or a precise robot); off by default: "
-                   "with poses a degree off it finds nothing, and tracking with its fuller models was less safe "
-                   "(README).")
+                   "recorded motion moved it, seen from a new aspect, gains a weaker confirmation: fuller models "
+                   "where the poses are exact to a few tenths of a pixel (simulated, or a precise robot); off by "
+                   "default: with poses a degree off it finds nothing, and tracking with its fuller models was "
+                   "less safe (README). Not with --motion tracked.")
 @box_option
 @frame_workers_option
 @frames_option

@@ -106,7 +106,7 @@ from .metric import MetricThresholds, candidate_pairs, d_o, d_p, pair_costs
 from .recording import StereoIntrinsics
 from .segments import Segments, concatenate
 from .stereo import StereoParams, view_plane_normals
-from .visibility import MIN_DEPTH_M, in_both_images
+from .visibility import in_both_images
 
 
 
@@ -115,10 +115,11 @@ OBSERVATION_ONLY = ("view_normal", "view_sigma")
 # the entity's sums that an observation adds to, scaled down together at ``max_weight`` (``dir_info``: view planes)
 RUNNING_SUMS = ("info", "info_vec", "dir_sum", "weight", "inv_var_position", "inv_var_direction", "dir_info")
 # ``image_confirmed``'s search (the tracker's: ``edge_search``): points along a segment, px searched across it
-# each way, and what counts as its edge there (grey levels per pixel across it, and the share of the gradient
+# each way, the shortest projection judged, and what counts as its edge there (grey levels per pixel across it, and the share of the gradient
 # that lies across it)
 IMAGE_SAMPLES = 9
 IMAGE_SEARCH_PX = 3
+IMAGE_MIN_LENGTH_PX = 5.0     # a shorter projection (a segment along its viewing ray) says little
 IMAGE_MIN_GRADIENT = 4.0
 IMAGE_MIN_COS = 0.85
 
@@ -365,17 +366,20 @@ class LineSegmentType:
 
     def image_confirmed(self, model: Segments, still: Segments, context: FrameContext,
                         candidates: np.ndarray) -> np.ndarray:
-        """(N,) bool: of the ``candidates`` (N,) bool, the model segments whose edge both images show where
-        this frame's pose projects them, seen from a new aspect (``accumulate``, step 4): at
-        ``IMAGE_SAMPLES`` points along the middle 80 % of the segment, the strongest gradient across it within
-        ``IMAGE_SEARCH_PX`` (the tracker's ``edge_search``) lies within ``image_tolerance_px`` of the
-        projection at ``image_share`` of them, in the left and in the right image. Judged only where (1)
-        the segment's first observation held still in the sensor's frame (``still`` (N,), model frame)
-        projects ``image_shift_px`` or more across it (a static edge would show as well, and along its own
-        line a static line shows the same), and (2) the frame sees it from more than ``view_step_deg`` from
-        every stored view (from one aspect the images repeat the plane that one stereo pair saw, whatever
-        the segment's tilt in depth: a new aspect tests its 3D place and direction). Needs the frame's
-        gradients of both images (``FrameContext``); without them, none."""
+        """(N,) bool: of the ``candidates`` (N,) bool, the model segments (object frame) whose edge both
+        images show where this frame's pose projects them, from a new aspect (``accumulate``, step 4): at
+        ``IMAGE_SAMPLES`` points along the middle 80 % of the segment, the strongest gradient across its
+        projection within ``IMAGE_SEARCH_PX`` (the tracker's ``edge_search``) lies within
+        ``image_tolerance_px`` of it at ``image_share`` of them, in the left and in the right image (each
+        searched across its own projected line). Judged only where the segment is in view
+        (``in_both_images``), projects at least ``IMAGE_MIN_LENGTH_PX`` long in both images and as far
+        from the rows as ``expected`` asks (near them the right image repeats the left one's line), and
+        where (1) its first observation held still in the sensor's frame (``still`` (N,), object frame)
+        projects ``image_shift_px`` or more across it in the left image (a static edge would show as
+        well, and along its own line a static line shows the same), and (2) the frame sees it from more
+        than ``view_step_deg`` from every stored view (from one aspect the images repeat the plane that
+        one stereo pair saw, whatever the segment's tilt in depth: a new aspect tests its 3D place and
+        direction). Needs both images' gradients (``FrameContext``); without them, none."""
         out = np.zeros(len(model), bool)
         if context.left_gradients is None or context.right_gradients is None or not candidates.any():
             return out
@@ -383,31 +387,28 @@ class LineSegmentType:
         k = np.flatnonzero(candidates)
         to_camera = invert(T)[:3, 3] - model.centers[k]
         to_camera /= np.maximum(np.linalg.norm(to_camera, axis=1, keepdims=True), 1e-12)
-        new_aspect = np.einsum("nkj,nj->nk", model.extra["views"][k], to_camera).max(axis=1) <= \
-            np.cos(np.radians(p.view_step_deg))
-        k = k[new_aspect]
+        k = k[np.einsum("nkj,nj->nk", model.extra["views"][k], to_camera).max(axis=1)
+              <= np.cos(np.radians(p.view_step_deg))]
         along = np.linspace(-0.4, 0.4, IMAGE_SAMPLES)[None, :, None] * model.lengths[k, None, None]
         points = transform_points(T, (model.centers[k, None, :] + along * model.directions[k, None, :]).reshape(-1, 3))
-        points = points.reshape(len(k), IMAGE_SAMPLES, 3)
-        z = points[..., 2]
-        front = (z > MIN_DEPTH_M).all(axis=1)
-        z = np.where(front[:, None], z, 1.0)
-        u_left, v = intr.fx * points[..., 0] / z + intr.cx, intr.fy * points[..., 1] / z + intr.cy
-        u_right = u_left - intr.fx * intr.baseline / z
-        reach = IMAGE_SEARCH_PX + 1
-        inside = front & (v.min(axis=1) >= reach) & (v.max(axis=1) <= intr.height - 1 - reach)
-        for u in (u_left, u_right):
-            inside &= (u.min(axis=1) >= reach) & (u.max(axis=1) <= intr.width - 1 - reach)
-        line = np.column_stack([u_left[:, -1] - u_left[:, 0], v[:, -1] - v[:, 0]])
-        normal = np.column_stack([-line[:, 1], line[:, 0]]) / np.maximum(np.linalg.norm(line, axis=1, keepdims=True), 1e-12)
+        inside = in_both_images(points, intr, margin_px=IMAGE_SEARCH_PX + 1,
+                                border_distance=context.border_distance).reshape(len(k), IMAGE_SAMPLES).all(axis=1)
+        uv = [side.reshape(len(k), IMAGE_SAMPLES, 2) for side in intr.project(points)[:2]]     # left, right (px)
+        with np.errstate(invalid="ignore"):     # ends behind the camera project to inf - inf: not ``inside``
+            lines = [side[:, -1] - side[:, 0] for side in uv]
+        spans = [np.linalg.norm(line, axis=1) for line in lines]
+        normals = [np.column_stack([-line[:, 1], line[:, 0]]) / np.maximum(span, 1e-12)[:, None]
+                   for line, span in zip(lines, spans)]
+        off_rows = np.degrees(np.arctan2(np.abs(lines[0][:, 1]), np.abs(lines[0][:, 0]))) >= p.critical_angle_deg + 3.0
         still_uv = intr.project(transform_points(T, still.centers[k]))[0]
-        middle = np.column_stack([u_left[:, IMAGE_SAMPLES // 2], v[:, IMAGE_SAMPLES // 2]])
-        judged = np.flatnonzero(inside & (np.abs(np.sum((still_uv - middle) * normal, axis=1)) >= p.image_shift_px))
+        moved = np.abs(np.sum((still_uv - uv[0][:, IMAGE_SAMPLES // 2]) * normals[0], axis=1)) >= p.image_shift_px
+        with np.errstate(invalid="ignore"):
+            judged = np.flatnonzero(inside & off_rows & moved & (np.minimum(*spans) >= IMAGE_MIN_LENGTH_PX))
         ok = np.ones(len(judged), bool)
-        normals = np.ascontiguousarray(np.repeat(normal[judged], IMAGE_SAMPLES, axis=0))
-        for grads, u in ((context.left_gradients, u_left), (context.right_gradients, u_right)):
-            uv = np.ascontiguousarray(np.stack([u[judged], v[judged]], axis=-1).reshape(-1, 2), np.float64)
-            found = edge_candidates(grads.gxy, uv, normals, IMAGE_SEARCH_PX, IMAGE_MIN_GRADIENT, IMAGE_MIN_COS, 1)[:, 0]
+        for grads, side, normal in zip((context.left_gradients, context.right_gradients), uv, normals):
+            found = edge_candidates(grads.gxy, np.ascontiguousarray(side[judged].reshape(-1, 2), np.float64),
+                                    np.ascontiguousarray(np.repeat(normal[judged], IMAGE_SAMPLES, axis=0)),
+                                    IMAGE_SEARCH_PX, IMAGE_MIN_GRADIENT, IMAGE_MIN_COS, 1)[:, 0]
             ok &= (np.abs(found) <= p.image_tolerance_px).reshape(len(judged), IMAGE_SAMPLES).mean(axis=1) >= p.image_share
         out[k[judged[ok]]] = True
         return out

@@ -81,6 +81,10 @@ class AccumulateParams:
     def __post_init__(self):
         if self.motion not in MOTIONS:
             raise InputError(f"motion {self.motion!r}: expected one of {', '.join(MOTIONS)}")
+        if self.motion == "tracked" and self.rule.image_confirmation is not None:
+            # a pose refined on the images puts the model on their edges: they would confirm themselves
+            raise InputError("--image-confirm needs the recorded poses: with --motion tracked the poses are fitted "
+                             "to the same images; drop one of the two")
         object.__setattr__(self, "box", check_box(self.box))
         # A segment is expected in a frame only where it could have been extracted there, so the line
         # model's critical angle is always the extraction's (one setting, however the params are built).
@@ -170,10 +174,10 @@ class LineAccumulation:
     def _miss_test_inputs(self, frame: StereoFrame, extraction: FrameSegments
                           ) -> tuple[Gradients | None, Segments2D | None]:
         """The left image's gradients and the left pieces that became 3D segments, for ``expected``'s
-        test of what the extraction missed ((None, None) when ``unextracted_no_miss`` is off): the
+        test of what the extraction missed and ``image_confirmed`` ((None, None) when both are off): the
         extraction's gradients, or computed again where a helper process or a replay dropped them
         (``runs.parallel``, ``runs.accumulation.ExtractionStore``)."""
-        if not self.params.line_model.unextracted_no_miss:
+        if not (self.params.line_model.unextracted_no_miss or self.params.rule.image_confirmation is not None):
             return None, None
         gradients = extraction.gradients[0] if extraction.gradients is not None else Gradients.of(
             frame.left, self.params.extract.lines,

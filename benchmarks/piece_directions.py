@@ -95,7 +95,7 @@ def _angle_error(direction: np.ndarray, a: np.ndarray, b: np.ndarray, intr, righ
     edge = project(b) - project(a)
     edge /= np.linalg.norm(edge, axis=1, keepdims=True)
     cross = direction[:, 0] * edge[:, 1] - direction[:, 1] * edge[:, 0]
-    return np.degrees(np.arcsin(np.clip(cross * np.sign(np.sum(direction * edge, axis=1)), -1, 1)))
+    return np.degrees(np.arcsin(np.clip(cross * np.where(np.sum(direction * edge, axis=1) >= 0, 1.0, -1.0), -1, 1)))
 
 
 def _depth_on_edge(centers: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:

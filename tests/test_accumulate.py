@@ -667,9 +667,10 @@ def test_images_confirm_a_segment_where_it_moved_only_if_right_in_3d_and_seen_fr
     """An edge along y through the object's origin, first seen at T0; in a frame turned by 12 degrees
     about y and moved 10 mm across (x) both images show it where it moved. A segment on it is
     confirmed; one tilted 15 degrees in depth within the first view's plane (which that view could
-    not tell apart) projects off the edge from the new aspect and is not; neither where the images
-    show the edge at the first observation's still place (static), nor from the first aspect, nor
-    where the object moved along the line only (a static line would look the same)."""
+    not tell apart) projects off the edge from the new aspect and is not; nor is either where the
+    right image shows the edge at another depth, nor from the first aspect, nor where the object
+    moved too little across the line (1 mm, 1.2 px) or along it only (a static line would look the
+    same), nor a segment that is not a candidate."""
     kind = LineSegmentType()
     T0 = _turned(0.0, [0.0, 0.0, 0.0])
     tilt = np.radians(15.0)
@@ -679,36 +680,43 @@ def test_images_confirm_a_segment_where_it_moved_only_if_right_in_3d_and_seen_fr
     model = kind.observe(first, FrameContext(T0, INTR))
     sensed = first.transformed(T0, "camera_left")        # the first observation, held still in the camera
 
-    def confirmed(T, u_edge):
-        left, right = _step_images(u_edge, 0.5)
+    def confirmed(T, u_edge, depth=0.5, candidates=(True, True)):
+        left, right = _step_images(u_edge, depth)
         still = sensed.transformed(invert(T), "gripper")
         return kind.image_confirmed(model, still, FrameContext(T, INTR, left_gradients=left, right_gradients=right),
-                                    np.ones(2, bool))
+                                    np.array(candidates)).tolist()
+
+    def u_at(x):    # where the edge, moved x m across, projects in the left image
+        return INTR.fx * x / 0.5 + INTR.cx
 
     T1 = _turned(12.0, [0.01, 0.0, 0.0])
-    moved_u = INTR.fx * 0.01 / 0.5 + INTR.cx
-    assert confirmed(T1, moved_u).tolist() == [True, False]
-    assert confirmed(T1, INTR.cx).tolist() == [False, False]            # the edge stayed where it was first seen
-    assert confirmed(_turned(0.0, [0.01, 0.0, 0.0]), moved_u).tolist() == [False, False]   # the first aspect
-    assert confirmed(_turned(12.0, [0.0, 0.01, 0.0]), INTR.cx).tolist() == [False, False]  # moved along it
+    assert confirmed(T1, u_at(0.01)) == [True, False]
+    assert confirmed(T1, u_at(0.01), candidates=(False, True)) == [False, False]
+    assert confirmed(T1, u_at(0.01), depth=0.48) == [False, False]      # the right image's edge 2 px off
+    assert confirmed(_turned(0.0, [0.01, 0.0, 0.0]), u_at(0.01)) == [False, False]       # the first aspect
+    assert confirmed(_turned(12.0, [0.001, 0.0, 0.0]), u_at(0.001)) == [False, False]    # 1.2 px across
+    assert confirmed(_turned(12.0, [0.0, 0.01, 0.0]), INTR.cx) == [False, False]         # moved along it
 
 
-def test_an_image_confirmation_raises_an_unconfirmed_segment_only_when_switched_on():
-    """A segment seen once and then not extracted again, in a frame whose images show it where it
-    moved from a new aspect: with ``image_confirmation`` its log-odds rise by that much, without
-    (the default) a miss of a segment not yet found again costs nothing."""
-    T0, T1 = _turned(0.0, [0.0, 0.0, 0.0]), _turned(12.0, [0.01, 0.0, 0.0])
+def test_an_image_confirmation_replaces_a_miss_only_when_switched_on():
+    """A segment seen in three frames of one aspect, then not extracted in a frame whose images show
+    it where it moved, from a new aspect: the default misses it (its log-odds fall), with
+    ``image_confirmation`` it gains that much instead and counts as confirmed that frame."""
+    poses = [_turned(0.0, [0.0, 0.0, 0.0]), _turned(2.0, [0.0, 0.0, 0.0]), _turned(4.0, [0.0, 0.0, 0.0])]
+    T1 = _turned(16.0, [0.01, 0.0, 0.0])
     left, right = _step_images(INTR.fx * 0.01 / 0.5 + INTR.cx, 0.5)
-    observed = Segments("gripper", np.zeros((1, 3)), np.array([[0.0, 1.0, 0.0]]), np.array([0.04]), np.array([0.9]),
-                        np.ones(1, np.int64), {"sigma_depth_m": np.array([0.001])}).transformed(T0, "camera_left")
-    rises = {}
+    edge = Segments("gripper", np.zeros((1, 3)), np.array([[0.0, 1.0, 0.0]]), np.array([0.04]), np.array([0.9]),
+                    np.ones(1, np.int64), {"sigma_depth_m": np.array([0.001])})
+    changes = {}
     for rule in (UpdateRule(), UpdateRule(image_confirmation=0.6)):
         kind = LineSegmentType()
         core = Accumulator(kind, kind.empty("camera_left"), rule)
-        core.update(observed, invert(T0), FrameContext(T0, INTR))
+        for T in poses:
+            core.update(edge.transformed(T, "camera_left"), invert(T), FrameContext(T, INTR))
         before = float(core.log_odds[0])
         stats = core.update(Segments.empty("camera_left"), invert(T1),
                             FrameContext(T1, INTR, left_gradients=left, right_gradients=right))
-        rises[rule.image_confirmation] = (float(core.log_odds[0]) - before, stats.image_confirmed)
-    assert rises[None] == (0.0, 0)
-    assert abs(rises[0.6][0] - 0.6) < 1e-12 and rises[0.6][1] == 1
+        changes[rule.image_confirmation] = (float(core.log_odds[0]) - before, stats.missed, stats.image_confirmed,
+                                            int(core.last_confirmed[0]) == core.frame - 1)
+    assert changes[None][0] < -0.3 and changes[None][1:] == (1, 0, False)
+    assert abs(changes[0.6][0] - 0.6) < 1e-12 and changes[0.6][1:] == (0, 1, True)
