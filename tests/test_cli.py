@@ -830,3 +830,13 @@ def test_plane_agreement_needs_view_planes(tmp_path):
     result = run("accumulate", "sample_data/sim_box.mcap", "-o", tmp_path / "m.json", "--plane-agreement", "0.006", "--average-directions")
     assert result.exit_code != 0 and "--average-directions has none" in result.output
     assert not (tmp_path / "m.json").exists()
+
+
+def test_image_confirm_is_refused_with_tracked_motion(tmp_path):
+    """--image-confirm judges segments on the images at the recorded poses; --motion tracked fits the
+    poses to the same images: refused in one line, exit 1, no model written."""
+    result = run("accumulate", "sample_data/sim_box.mcap", "-o", tmp_path / "m.json", "--image-confirm",
+                 "--motion", "tracked")
+    assert result.exit_code == 1 and "--image-confirm needs the recorded poses" in result.output
+    assert "Traceback" not in result.output and len(result.output.strip().splitlines()) == 1
+    assert not (tmp_path / "m.json").exists()
