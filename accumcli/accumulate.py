@@ -180,6 +180,11 @@ class EntityType(Protocol[E]):
 IMAGE_CONFIRMATION = 0.6   # ``UpdateRule.image_confirmation`` of ``accum accumulate --image-confirm`` (step 4)
 
 
+def image_confirming(on: bool) -> "UpdateRule":
+    """The default rule, with ``IMAGE_CONFIRMATION`` where ``on`` (``accum accumulate --image-confirm``)."""
+    return UpdateRule(image_confirmation=IMAGE_CONFIRMATION if on else None)
+
+
 def logit(p: float) -> float:
     return float(np.log(p / (1.0 - p)))
 

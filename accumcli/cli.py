@@ -414,7 +414,7 @@ def accumulate(recording, outputs, ply_all, rrd, truth, history, plot, png, pane
       accum accumulate sample_data/sim_box.mcap -o out/model.json -o out/model.ply --rrd out/run.rrd
       accum accumulate sample_data/chessboard/chessboard.mcap --object-frame board -o out/board.json
     """
-    from .accumulate import IMAGE_CONFIRMATION, UpdateRule
+    from .accumulate import image_confirming
     from .dominant_directions import DominantParams
     from .line_model import LineModelParams
     from .metric import MetricThresholds
@@ -431,8 +431,8 @@ def accumulate(recording, outputs, ply_all, rrd, truth, history, plot, png, pane
                                  view_planes=view_planes, plane_agreement=plane_agreement,
                                  merge_twins=merge_twins,
                                  dominant=DominantParams() if dominant_directions else None)
-    rule = UpdateRule(image_confirmation=IMAGE_CONFIRMATION if image_confirm else None)
-    params = AccumulateParams(extract=extract_params, line_model=line_model, rule=rule, motion=motion, box=box)
+    params = AccumulateParams(extract=extract_params, line_model=line_model, rule=image_confirming(image_confirm),
+                              motion=motion, box=box)
     result = run_with_progress("accumulating", accumulate_recording, recording, outputs, params=params,
                                options=options, frames=frames, truth=truth, history=history, plot=plot, rrd=rrd,
                                png=png, panel=panel, ply_all=ply_all, poses=poses, workers=workers)

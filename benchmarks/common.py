@@ -30,12 +30,12 @@ def recording(name: str, **options) -> str:
 def accumulate_params(view_planes: bool = True, motion: str = "gripper", image_confirm: bool = False):
     """The accumulation parameters of the scoreboards: the defaults, or ``accum accumulate
     --average-directions``, ``--motion tracked`` and / or ``--image-confirm``."""
-    from accumcli.accumulate import IMAGE_CONFIRMATION, UpdateRule
+    from accumcli.accumulate import image_confirming
     from accumcli.line_model import LineModelParams
     from accumcli.pipeline import AccumulateParams
 
     return AccumulateParams(line_model=LineModelParams(view_planes=view_planes), motion=motion,
-                            rule=UpdateRule(image_confirmation=IMAGE_CONFIRMATION if image_confirm else None))
+                            rule=image_confirming(image_confirm))
 
 
 def run_child(code: str) -> dict:

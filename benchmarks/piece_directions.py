@@ -90,10 +90,10 @@ def _angle_error(direction: np.ndarray, a: np.ndarray, b: np.ndarray, intr, righ
     (N, 3, camera frame) in the left image (``right`` 0) or the right one (1); nan where an end is
     behind the camera."""
     def project(p):
-        z = np.where(p[:, 2] > 1e-6, p[:, 2], np.nan)
-        return np.column_stack([intr.fx * (p[:, 0] - right * intr.baseline) / z + intr.cx, intr.fy * p[:, 1] / z + intr.cy])
-    edge = project(b) - project(a)
-    edge /= np.linalg.norm(edge, axis=1, keepdims=True)
+        return np.where((p[:, 2] > 1e-6)[:, None], intr.project(p)[int(right)], np.nan)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        edge = project(b) - project(a)
+        edge /= np.linalg.norm(edge, axis=1, keepdims=True)
     cross = direction[:, 0] * edge[:, 1] - direction[:, 1] * edge[:, 0]
     return np.degrees(np.arcsin(np.clip(cross * np.where(np.sum(direction * edge, axis=1) >= 0, 1.0, -1.0), -1, 1)))
 
