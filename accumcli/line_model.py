@@ -399,7 +399,7 @@ class LineSegmentType:
         spans = [np.linalg.norm(line, axis=1) for line in lines]
         normals = [np.column_stack([-line[:, 1], line[:, 0]]) / np.maximum(span, 1e-12)[:, None]
                    for line, span in zip(lines, spans)]
-        off_rows = np.degrees(np.arctan2(np.abs(lines[0][:, 1]), np.abs(lines[0][:, 0]))) >= p.critical_angle_deg + 3.0
+        off_rows = _clear_of_rows(lines[0], p)
         still_uv = intr.project(transform_points(T, still.centers[k]))[0]
         moved = np.abs(np.sum((still_uv - uv[0][:, IMAGE_SAMPLES // 2]) * normals[0], axis=1)) >= p.image_shift_px
         with np.errstate(invalid="ignore"):
@@ -423,8 +423,7 @@ class LineSegmentType:
         uv_left = intr.project(ends)[0]
         with np.errstate(invalid="ignore"):     # ends in the camera's plane project to infinity; not ``inside``
             d2 = (uv_left[1::2] - uv_left[0::2])
-        angle = np.degrees(np.arctan2(np.abs(d2[:, 1]), np.abs(d2[:, 0])))
-        not_critical = angle >= p.critical_angle_deg + 3.0
+        not_critical = _clear_of_rows(d2, p)
         to_camera = (invert(T)[:3, 3] - model.centers).astype(np.float32)
         # cos(view, stored) >= cos(margin), without normalising: unused (zero) slots give 0
         projections = np.einsum("nkj,nj->nk", model.extra["views"], to_camera).max(axis=1)
@@ -434,6 +433,13 @@ class LineSegmentType:
             k = np.flatnonzero(expected if confirmed is None else expected & ~confirmed)
             expected[k[_unextracted(uv_left[0::2][k], uv_left[1::2][k], context, p)]] = False
         return expected
+
+
+def _clear_of_rows(line_px: np.ndarray, p: LineModelParams) -> np.ndarray:
+    """(N,) bool: projected segments (N, 2) px, end less start, at least 3 degrees farther from the image
+    rows than the critical angle: extraction would have matched them along the rows (``expected``), and
+    there the right image's line is not the left one's again (``image_confirmed``)."""
+    return np.degrees(np.arctan2(np.abs(line_px[:, 1]), np.abs(line_px[:, 0]))) >= p.critical_angle_deg + 3.0
 
 
 def _direction_of_planes(extra: dict, directions: np.ndarray, mi: np.ndarray, p: LineModelParams) -> np.ndarray:

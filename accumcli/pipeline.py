@@ -179,20 +179,20 @@ class LineAccumulation:
         (``runs.parallel``, ``runs.accumulation.ExtractionStore``)."""
         if not (self.params.line_model.unextracted_no_miss or self.params.rule.image_confirmation is not None):
             return None, None
-        gradients = extraction.gradients[0] if extraction.gradients is not None else Gradients.of(
-            frame.left, self.params.extract.lines,
-            border_distance=frame.border_distance[0] if frame.border_distance is not None else None)
-        return gradients, extraction.left.select(extraction.left_index)
+        return self._gradients(frame, extraction, 0), extraction.left.select(extraction.left_index)
 
     def _right_gradients(self, frame: StereoFrame, extraction: FrameSegments) -> Gradients | None:
-        """The right image's gradients for ``image_confirmed`` (None where ``image_confirmation`` is off): the
-        extraction's, or computed again where a helper process or a replay dropped them."""
-        if self.params.rule.image_confirmation is None:
-            return None
+        """The right image's gradients for ``image_confirmed`` (None where ``image_confirmation`` is off)."""
+        return None if self.params.rule.image_confirmation is None else self._gradients(frame, extraction, 1)
+
+    def _gradients(self, frame: StereoFrame, extraction: FrameSegments, side: int) -> Gradients:
+        """The extraction's gradients of the left (``side`` 0) or right (1) image, or computed again where a
+        helper process or a replay dropped them."""
         if extraction.gradients is not None:
-            return extraction.gradients[1]
-        return Gradients.of(frame.right, self.params.extract.lines,
-                            border_distance=frame.border_distance[1] if frame.border_distance is not None else None)
+            return extraction.gradients[side]
+        border = frame.border_distance
+        return Gradients.of((frame.left, frame.right)[side], self.params.extract.lines,
+                            border_distance=border[side] if border is not None else None)
 
     def _written(self, uncertainty: bool = True) -> Segments:
         """The core's segments as ``to_model`` writes them, with this run's acceptance rules (its twins
