@@ -399,14 +399,20 @@ def extract(recording, output, rrd, with_2d, workers, frames, extract_params, op
                    "where the poses are exact to a few tenths of a pixel (simulated, or a precise robot); off by "
                    "default: with poses a degree off it finds nothing, and tracking with its fuller models was "
                    "less safe (README). Not with --motion tracked.")
+@click.option("--across-frames/--stereo-only", default=None,
+              help="Also triangulate lines across frames with the recorded motion: a left-image edge meets its own "
+                   "plane of a frame 2 or 4 back, checked in four more frames (a wide baseline for the short and "
+                   "near-horizontal edges one stereo pair places badly or not at all); --stereo-only: each stereo "
+                   "pair alone (the paper's). Default: on with the gripper's motion, off with --motion tracked (it "
+                   "trusts the relative poses to a tenth of a degree).")
 @box_option
 @frame_workers_option
 @frames_option
 @extraction_options
 @recording_options
 def accumulate(recording, outputs, ply_all, rrd, truth, history, plot, png, panel, motion, poses, position_threshold,
-               angle_threshold, view_planes, plane_agreement, merge_twins, dominant_directions, image_confirm, box,
-               workers, frames, extract_params, options):
+               angle_threshold, view_planes, plane_agreement, merge_twins, dominant_directions, image_confirm,
+               across_frames, box, workers, frames, extract_params, options):
     """Accumulate a model of the object over the recording, with the gripper's known motion.
 
     \b
@@ -420,6 +426,7 @@ def accumulate(recording, outputs, ply_all, rrd, truth, history, plot, png, pane
     from .metric import MetricThresholds
     from .pipeline import AccumulateParams
     from .report import accumulation_lines
+    from .temporal_lines import TemporalParams
     from .runs import accumulate_recording
     from .runs.base import MODEL_OUTPUTS, POSES_OUTPUTS
 
@@ -432,7 +439,8 @@ def accumulate(recording, outputs, ply_all, rrd, truth, history, plot, png, pane
                                  merge_twins=merge_twins,
                                  dominant=DominantParams() if dominant_directions else None)
     params = AccumulateParams(extract=extract_params, line_model=line_model, rule=image_confirming(image_confirm),
-                              motion=motion, box=box)
+                              motion=motion, box=box,
+                              temporal="auto" if across_frames is None else TemporalParams() if across_frames else None)
     result = run_with_progress("accumulating", accumulate_recording, recording, outputs, params=params,
                                options=options, frames=frames, truth=truth, history=history, plot=plot, rrd=rrd,
                                png=png, panel=panel, ply_all=ply_all, poses=poses, workers=workers)

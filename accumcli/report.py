@@ -78,6 +78,11 @@ def accumulation_lines(result, motion: str = "gripper") -> list[str]:
     if any("outside_box" in row for row in result.rows):
         outside, kept = (sum(row.get(key, 0) for row in result.rows) for key in ("outside_box", "observed"))
         lines.append(f"box: {outside} of {outside + kept} 3D segments lay outside it and were dropped")
+    if any("across_frames" in row for row in result.rows):
+        across, replacing, observed = (sum(row.get(key, 0) for row in result.rows)
+                                       for key in ("across_frames", "across_frames_replacing", "observed"))
+        lines.append(f"lines across frames: {across} of the {observed} 3D segments ({replacing} in place of a stereo "
+                     "segment less sure of its direction)")
     if motion == "tracked":
         lines.append(f"tracked motion: {result.refined_frames} of {result.frames} frames used a refined pose")
     if result.scores:

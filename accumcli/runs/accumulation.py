@@ -169,6 +169,8 @@ def accumulate_recording(recording, outputs=(), *, params: AccumulateParams = Ac
                 row = {"frame_index": frame.index, "timestamp_ns": frame.timestamp_ns, **step.stats.__dict__}
                 if params.box is not None:
                     row["outside_box"] = step.outside_box
+                if params.temporal is not None:
+                    row.update(across_frames=step.across_frames, across_frames_replacing=step.replaced)
                 if step.tracking is not None:
                     row.update(tracking=step.tracking.status, residual_px=step.tracking.residual_px)
                 if edges is not None or viz or scenes:
@@ -344,7 +346,8 @@ def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str,
     def accepted(extractions, pose_of) -> Segments:
         """The accepted segments of an accumulation, with the known motion, of (frame, extraction) pairs,
         each frame placed by ``pose_of(frame)``."""
-        accumulation = LineAccumulation(AccumulateParams(params.extract, averaging, params.rule, box=params.box),
+        accumulation = LineAccumulation(AccumulateParams(params.extract, averaging, params.rule, box=params.box,
+                                                         temporal=None),
                                         object_frame, camera_frame)
         for frame, extraction in extractions:
             accumulation.step(frame, pose_of(frame), extraction)

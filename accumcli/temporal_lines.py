@@ -1,0 +1,360 @@
+"""Line segments triangulated across frames with the known motion (multi-view, not stereo).
+
+A left-image piece fixes the plane through the camera and its edge; the recorded motion puts the
+planes of two frames in the object frame, and their intersection is the edge's line. The object turns
+5 to 10 degrees a frame on the suite's recordings, so two frames apart the views lie 15 to 25 degrees
+apart: a baseline several times the stereo rig's, and in another direction, which is what a short or
+near-horizontal piece lacks in stereo (its direction from two planes 8 cm apart is tilted in depth by
+tens of degrees, and near the epipolar direction it has no disparity at all).
+
+A pair of pieces from two views always meets somewhere: the pair is a hypothesis only if its two
+pieces overlap along the line they meet on, lie in front of both cameras, and a third view (another
+buffered frame's left image) shows a piece along the line's projection there (``verify_px``,
+``verify_deg``). A piece of the current frame keeps its best-verified partner, and none when two
+partners verify different lines equally well (ambiguous). Background that does not move with the
+object meets in no consistent line across three views of the object frame.
+
+Why written here: OpenCV has no line triangulation across posed views with these gates (its sfm
+module's is not in the wheels and takes matched lines, which is the hard part).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .geometry import invert, transform_points, unit_or_zero
+from .lines2d import Segments2D
+from .recording.calibration import StereoIntrinsics
+from .segments import Segments
+
+
+@dataclass(frozen=True)
+class TemporalParams:
+    frames_back: tuple = (4, 2)     # partner frames, this many frames before the current one
+    buffer: int = 6                 # frames kept for partners and verification (the current one's witnesses)
+    min_length_px: float = 6.0      # shorter pieces fix no plane worth intersecting
+    min_dihedral_deg: float = 8.0   # the two planes meet at least this steeply
+    min_overlap: float = 0.5        # of the shorter piece's extent, along the line they meet on
+    near_m: float = 0.1             # in front of both cameras, at least this far
+    reach_m: float = 0.4            # and within this of the object frame's origin (the gripper's)
+    still_px: float = 1.5           # a pair on one image line (this near across it) is the background's
+    min_votes: int = 4              # other views (of buffer - 1) that must verify a line
+    verify_px: float = 0.6          # a third view's piece lies this near across the projection ...
+    verify_deg: float = 3.0         # ... and this near its angle, its centre within the projection
+    ambiguous_votes: int = 0        # a runner-up verified this many times fewer still makes a piece ambiguous
+    same_line_deg: float = 5.0      # two partners verified as often put a piece on one line only within this
+    same_line_m: float = 0.002      # ... and this (else it is ambiguous, dropped)
+    line_sigma_px: float = 0.3      # a piece's position across itself, for the depth's sigma
+    # a line's direction error times the sine of its planes' angle is plane_turn_px_rad * hypot(1/la, 1/lb)
+    # for pieces la, lb px long: measured on the devset, median 0.39 / 0.61 / 0.98 degrees for pieces of
+    # 13 to 20 / 10 to 13 / under 10 px on dev_cube_small (the noisiest), half that on dev_tprofile
+    plane_turn_px_rad: float = 0.085
+    plane_sigma_deg: float = 0.1    # and a plane's at least this (the poses', the line's)
+    # plus this in quadrature, whatever the planes' angle (the errors fall slower than 1 / sine: on
+    # dev_cube_small median 2.4 / 1.8 / 1.6 degrees at sines 0.1-0.25 / 0.25-0.4 / 0.4-0.6)
+    direction_floor_deg: float = 1.5
+
+
+@dataclass
+class View:
+    """One frame's left pieces, in the object frame: ``camera`` (3,) the camera centre; ``normals`` (N, 3)
+    unit normals of the pieces' planes through it; ``ends`` (N, 2, 3) unit rays through the pieces'
+    ends; ``pieces`` the 2D pieces (px, for verification); ``T_camera_object``; ``intr``."""
+
+    camera: np.ndarray
+    normals: np.ndarray
+    ends: np.ndarray
+    pieces: Segments2D
+    T_camera_object: np.ndarray
+    intr: StereoIntrinsics
+    index: int
+    reach: tuple = ()                  # (enter, leave), (N, 2) metres along the end rays within reach
+    _tree: cKDTree | None = None
+
+    def tree(self) -> cKDTree:
+        """The pieces' centres, searched by every hypothesis this view verifies (built once)."""
+        if self._tree is None:
+            self._tree = cKDTree(self.pieces.centers)
+        return self._tree
+
+    @classmethod
+    def of(cls, pieces: Segments2D, T_camera_object: np.ndarray, intr: StereoIntrinsics, index: int,
+           p: "TemporalParams") -> "View":
+        K_inv = np.linalg.inv(intr.K)
+        ends_px = pieces.endpoints().reshape(-1, 2)
+        rays_camera = np.column_stack([ends_px, np.ones(len(ends_px))]) @ K_inv.T
+        R = T_camera_object[:3, :3]
+        rays = unit_or_zero(rays_camera @ R).reshape(-1, 2, 3)      # R^T r, camera -> object
+        normals = unit_or_zero(np.cross(rays[:, 0], rays[:, 1]))
+        camera = invert(T_camera_object)[:3, 3]
+        enter, leave = _reach_on_rays(camera, rays.reshape(-1, 3), p)
+        return cls(camera, normals, rays, pieces, T_camera_object, intr, index,
+                   (enter.reshape(-1, 2), leave.reshape(-1, 2)))
+
+
+def _plane_sigma(lengths_px: np.ndarray, p: TemporalParams) -> np.ndarray:
+    """(N,) rad: how far a piece's plane turns, as it meets another: ``plane_turn_px_rad`` over its
+    length, at least ``plane_sigma_deg`` (measured, ``TemporalParams``)."""
+    return np.hypot(np.radians(p.plane_sigma_deg), p.plane_turn_px_rad / np.maximum(lengths_px, 1.0))
+
+
+def _on_ray(camera: np.ndarray, rays: np.ndarray, plane_point: np.ndarray, plane_normals: np.ndarray) -> np.ndarray:
+    """(K,) metres along unit ``rays`` (K, 3) from ``camera`` to the planes (``plane_normals`` (K, 3)
+    through ``plane_point``); nan where a ray runs along its plane."""
+    denominator = np.sum(rays * plane_normals, axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        distance = np.sum((plane_point - camera) * plane_normals, axis=1) / denominator
+    return np.where(np.abs(denominator) > 1e-3, distance, np.nan)
+
+
+def _reach_on_rays(camera: np.ndarray, rays: np.ndarray, p: TemporalParams) -> tuple[np.ndarray, np.ndarray]:
+    """(K,) and (K,) metres: where the unit ``rays`` (K, 3) from ``camera`` (object frame) enter and
+    leave the ball of ``reach_m`` about the object frame's origin, from ``near_m`` on (nan: never)."""
+    along = rays @ -camera
+    half = np.sqrt(np.maximum(along ** 2 - (camera @ camera - p.reach_m ** 2), 0.0))
+    enter, leave = np.maximum(along - half, p.near_m), along + half
+    missed = (along ** 2 < camera @ camera - p.reach_m ** 2) | (leave <= enter)
+    return np.where(missed, np.nan, enter), np.where(missed, np.nan, leave)
+
+
+def _candidate_pairs(a: View, b: View, ia: np.ndarray, jb: np.ndarray, p: TemporalParams
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs (i of ``ia``, j of ``jb``) of pieces of views ``a`` and ``b`` that can show one edge
+    within reach: they share an epipolar plane (through both cameras; each piece's ends span an
+    interval of the planes' angle about the baseline, as rectified stereo's rows), and b's rays
+    meet a's within the ball of ``reach_m`` (an interval of their angle to the baseline). Sorted and
+    searched on the first, not all pairs: a frame has a thousand pieces or more."""
+    if not len(ia) or not len(jb):
+        return ia[:0], jb[:0]
+    axis = unit_or_zero(b.camera - a.camera)
+    rays = np.concatenate([a.ends[ia].reshape(-1, 3), b.ends[jb].reshape(-1, 3)])
+    across = rays - (rays @ axis)[:, None] * axis
+    u1 = unit_or_zero(across.mean(axis=0))      # the angle counted from the pieces' mean: no wrap near them
+    u2 = np.cross(axis, u1)
+    angle = np.arctan2(across @ u2, across @ u1).reshape(-1, 2)
+    lo, hi = angle.min(axis=1), angle.max(axis=1)
+    usable = hi - lo < np.pi / 2                # a piece around the epipole: no interval
+    # the angle to the baseline of b's rays, and of the points of a's rays within reach seen from b
+    enter, leave = _reach_on_rays(a.camera, a.ends[ia].reshape(-1, 3), p)
+    reach = np.concatenate([a.camera + enter[:, None] * a.ends[ia].reshape(-1, 3),
+                            a.camera + leave[:, None] * a.ends[ia].reshape(-1, 3)]) - b.camera
+    elevation_a = (unit_or_zero(reach) @ axis).reshape(2, -1, 2).transpose(1, 0, 2).reshape(-1, 4)  # cosines
+    low_a, high_a = np.fmin.reduce(elevation_a, axis=1), np.fmax.reduce(elevation_a, axis=1)   # nan: out of reach
+    elevation_b = (b.ends[jb].reshape(-1, 3) @ axis).reshape(-1, 2)
+    low_b, high_b = elevation_b.min(axis=1), elevation_b.max(axis=1)
+    lo_a, hi_a, lo_b, hi_b = lo[:len(ia)], hi[:len(ia)], lo[len(ia):], hi[len(ia):]
+    ok_a, ok_b = usable[:len(ia)] & np.isfinite(low_a), usable[len(ia):]
+    order = np.flatnonzero(ok_b)[np.argsort(lo_b[ok_b])]
+    widest = (hi_b - lo_b)[ok_b].max(initial=0.0)
+    first = np.searchsorted(lo_b[order], lo_a - widest)
+    count = np.where(ok_a, np.searchsorted(lo_b[order], hi_a, side="right") - first, 0)
+    x = np.repeat(np.arange(len(ia)), count)
+    y = order[np.repeat(first, count) + np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)]
+    keep = (hi_b[y] >= lo_a[x]) & (high_b[y] >= low_a[x]) & (low_b[y] <= high_a[x])
+    return ia[x[keep]], jb[y[keep]]
+
+
+def pair_hypotheses(a: View, b: View, p: TemporalParams, wanted: np.ndarray | None = None,
+                    distance: np.ndarray | None = None) -> dict:
+    """Every pair (piece i of ``a``, piece j of ``b``) whose planes meet on a line that both pieces
+    overlap along, in front of both cameras: arrays ``i``, ``j``, ``start``/``end`` (K, 3) the overlap's
+    ends (object frame, metres), ``a_start``/``a_end`` piece i's extent on the line, ``sine`` (K,) of
+    the planes' angle."""
+    ia = np.flatnonzero((a.pieces.lengths >= p.min_length_px) & (True if wanted is None else wanted))
+    jb = np.flatnonzero(b.pieces.lengths >= p.min_length_px)
+    i, j = _candidate_pairs(a, b, ia, jb, p)
+    na, nb = a.normals[i], b.normals[j]
+    ok = np.abs(_dot(na, nb)) <= np.cos(np.radians(p.min_dihedral_deg))     # planes that meet steeply enough
+    i, j, na, nb = i[ok], j[ok], na[ok], nb[ok]
+    # each piece's ends along their rays to the other's plane: in front and within reach
+    ra, rb = a.ends[i], b.ends[j]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ta = _dot(b.camera - a.camera, nb)[:, None] / _dot(ra, nb[:, None])        # (K, 2) metres
+        tb = _dot(a.camera - b.camera, na)[:, None] / _dot(rb, na[:, None])
+    ok = ((ta >= a.reach[0][i]) & (ta <= a.reach[1][i]) & (tb >= b.reach[0][j]) & (tb <= b.reach[1][j])).all(axis=1)
+    if distance is not None:     # where stereo put the piece: (lo, hi) metres from the camera, nan: anywhere
+        middle = (ta[:, 0] + ta[:, 1]) / 2
+        ok &= ~(middle < distance[0][i]) & ~(middle > distance[1][i])
+    # not the same image line in both frames: a line fixed in the camera (the background) meets its
+    # own planes of other frames where the motion's axis crosses it, the same point in every view
+    ok[ok] = ~_on_line(b.pieces.centers[j[ok]], b.pieces.directions[j[ok]], a.pieces.centers[i[ok]],
+                       a.pieces.directions[i[ok]], p.still_px, p.verify_deg)
+    i, j, na, nb, ra, rb, ta, tb = (x[ok] for x in (i, j, na, nb, ra, rb, ta, tb))
+    normal = np.cross(na, nb)
+    sine = np.linalg.norm(normal, axis=1)
+    direction = normal / sine[:, None]
+    pa = a.camera + ta[:, :, None] * ra       # (K, 2, 3), on the line
+    pb = b.camera + tb[:, :, None] * rb
+    origin = pa[:, 0]
+    along_a = _dot(pa - origin[:, None], direction[:, None])                     # (K, 2) metres
+    along_b = _dot(pb - origin[:, None], direction[:, None])
+    a0, a1 = np.minimum(along_a[:, 0], along_a[:, 1]), np.maximum(along_a[:, 0], along_a[:, 1])
+    b0, b1 = np.minimum(along_b[:, 0], along_b[:, 1]), np.maximum(along_b[:, 0], along_b[:, 1])
+    lo, hi = np.maximum(a0, b0), np.minimum(a1, b1)
+    keep = (hi - lo) >= p.min_overlap * np.minimum(a1 - a0, b1 - b0)
+    along = (lambda t: (origin + t[:, None] * direction)[keep])
+    return {"i": i[keep], "j": j[keep], "direction": direction[keep], "sine": sine[keep],
+            "start": along(lo), "end": along(hi), "a_start": along(a0), "a_end": along(a1)}
+
+
+def _dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Dot products over the last axis (of length 3), broadcast: written out, as numpy's sum and
+    einsum run several times slower on short last axes."""
+    return u[..., 0] * v[..., 0] + u[..., 1] * v[..., 1] + u[..., 2] * v[..., 2]
+
+
+def _on_line(centers: np.ndarray, directions: np.ndarray, line_centers: np.ndarray, line_directions: np.ndarray,
+             across_px: float, max_deg: float) -> np.ndarray:
+    """(K,) bool: 2D pieces (``centers``, unit ``directions``, (K, 2) px) lying on the lines through
+    ``line_centers`` along ``line_directions`` (K, 2): within ``across_px`` across, ``max_deg`` of their angle."""
+    rel = centers - line_centers
+    across = np.abs(rel[:, 0] * line_directions[:, 1] - rel[:, 1] * line_directions[:, 0])
+    return (across <= across_px) & (np.abs(np.sum(directions * line_directions, axis=1)) >= np.cos(np.radians(max_deg)))
+
+
+def verified_in(view: View, start: np.ndarray, end: np.ndarray, p: TemporalParams,
+                still: Segments2D | None = None) -> np.ndarray:
+    """(K,) bool: a piece of ``view`` lies along the projection of each object-frame segment
+    ``start``-``end`` (K, 3): within ``verify_px`` across, ``verify_deg`` of its angle, its centre
+    within the projection. ``still`` (K pieces of the current image): a witness piece on the same
+    image line as the current piece does not count (what stands still in the camera is there in
+    every view, wherever the motion puts the line)."""
+    out = np.zeros(len(start), bool)
+    if not len(start) or not len(view.pieces):
+        return out
+    T = view.T_camera_object
+    uv0, _, z0 = view.intr.project(transform_points(T, start))
+    uv1, _, z1 = view.intr.project(transform_points(T, end))
+    length = np.linalg.norm(uv1 - uv0, axis=1)
+    usable = np.flatnonzero((z0 > p.near_m) & (z1 > p.near_m) & np.isfinite(length) & (length >= 2.0))
+    if not len(usable):
+        return out
+    middle = (uv0 + uv1)[usable] / 2
+    direction = (uv1 - uv0)[usable] / length[usable, None]
+    pieces = view.pieces
+    k, m = [], []
+    span = length[usable]
+    for shorter, longer in ((0.0, 20.0), (20.0, 60.0), (60.0, np.inf)):     # one search radius per length class
+        group = np.flatnonzero((span >= shorter) & (span < longer))
+        if len(group):
+            pairs = cKDTree(middle[group]).sparse_distance_matrix(view.tree(), span[group].max() / 2 + p.verify_px,
+                                                                  output_type="ndarray")
+            k.append(group[pairs["i"]])
+            m.append(pairs["j"].astype(np.int64))
+    k, m = np.concatenate(k), np.concatenate(m)
+    rel = pieces.centers[m] - middle[k]
+    along = np.sum(rel * direction[k], axis=1)
+    across = np.abs(rel[:, 0] * direction[k, 1] - rel[:, 1] * direction[k, 0])
+    cosine = np.abs(np.sum(pieces.directions[m] * direction[k], axis=1))
+    on = (across <= p.verify_px) & (cosine >= np.cos(np.radians(p.verify_deg))) & \
+        (np.abs(along) <= length[usable][k] / 2)
+    if still is not None:
+        q = usable[k]
+        on &= ~_on_line(pieces.centers[m], pieces.directions[m], still.centers[q], still.directions[q],
+                        p.still_px, p.verify_deg)
+    out[usable[np.unique(k[on])]] = True
+    return out
+
+
+class TemporalLines:
+    """The last ``buffer`` frames' views, and the hypotheses of each new frame against them."""
+
+    def __init__(self, params: TemporalParams = TemporalParams(), camera_frame: str = "camera_left"):
+        self.params = params
+        self.camera_frame = camera_frame
+        self.views: deque[View] = deque(maxlen=params.buffer)
+
+    def step(self, pieces: Segments2D, T_camera_object: np.ndarray, intr: StereoIntrinsics, index: int,
+             wanted: np.ndarray | None = None, distance: tuple | None = None) -> Segments:
+        """The current frame's 3D segments from pieces of it and of a buffered frame, verified in a
+        third (in the camera frame, with ``sigma_*`` extras as stereo gives them; module
+        docstring); then the frame joins the buffer."""
+        view = View.of(pieces, T_camera_object, intr, index, self.params)
+        found = self._hypotheses(view, wanted, distance)
+        self.views.append(view)
+        return found
+
+    def _hypotheses(self, view: View, wanted: np.ndarray | None, distance: tuple | None) -> Segments:
+        p = self.params
+        by_index = {v.index: v for v in self.views}
+        rows = []
+        for back in p.frames_back:
+            partner = by_index.get(view.index - back)
+            if partner is None:
+                continue
+            h = pair_hypotheses(view, partner, p, wanted, distance)
+            if not len(h["i"]):
+                continue
+            witnesses = [v for v in self.views if v.index != partner.index]
+            votes = np.zeros(len(h["i"]), np.int64)
+            for left, w in enumerate(reversed(witnesses)):    # nearest first; only what can still pass
+                open_ = np.flatnonzero(votes + len(witnesses) - left >= p.min_votes)
+                votes[open_] += verified_in(w, h["start"][open_], h["end"][open_], p,
+                                            view.pieces.select(h["i"][open_]))
+            keep = votes >= p.min_votes
+            rows.append({k: v[keep] for k, v in h.items()} | {"votes": votes[keep], "partner": np.full(keep.sum(), back)})
+        if not rows:
+            return Segments.empty(self.camera_frame)
+        h = {k: np.concatenate([r[k] for r in rows]) for k in rows[0]}
+        if not len(h["i"]):
+            return Segments.empty(self.camera_frame)
+        # one line per current piece: the most votes, then the steepest planes; dropped when another
+        # partner with as many votes puts it on a different line
+        order = np.lexsort((-h["sine"], -h["votes"], h["i"]))
+        i_sorted = h["i"][order]
+        first = np.r_[True, i_sorted[1:] != i_sorted[:-1]]
+        best = order[first]
+        # the runner-up of each piece: ambiguous if it has as many votes and another direction
+        pos = np.flatnonzero(first)
+        following = np.minimum(pos + 1, len(order) - 1)
+        runner = np.where((pos + 1 < len(order)) & (i_sorted[following] == i_sorted[pos]), order[following], -1)
+        r = runner >= 0
+        ambiguous = np.zeros(len(best), bool)
+        same_votes = h["votes"][runner[r]] >= h["votes"][best[r]] - p.ambiguous_votes
+        cosine = np.abs(np.sum(h["direction"][runner[r]] * h["direction"][best[r]], axis=1))
+        middle = (h["a_start"] + h["a_end"]) / 2
+        apart = np.linalg.norm(middle[runner[r]] - middle[best[r]], axis=1)
+        ambiguous[r] = same_votes & ((cosine < np.cos(np.radians(p.same_line_deg))) | (apart > p.same_line_m))
+        best = best[~ambiguous]
+        return self._segments(view, {k: v[best] for k, v in h.items()})
+
+    def _segments(self, view: View, h: dict) -> Segments:
+        """3D segments (camera frame of ``view``) of the current pieces' extents on their lines, with
+        the sigmas of the triangulation: direction from the two planes' angles over their dihedral
+        sine, depth from the partner plane's position across itself over the ray's angle to it."""
+        p = self.params
+        T = view.T_camera_object
+        start, end = transform_points(T, h["a_start"]), transform_points(T, h["a_end"])
+        centers = (start + end) / 2
+        vec = end - start
+        lengths = np.linalg.norm(vec, axis=1)
+        directions = vec / np.maximum(lengths, 1e-12)[:, None]
+        partner_len = np.array([self._partner(view, b).pieces.lengths[j] for b, j in zip(h["partner"], h["j"])]) \
+            if len(h["j"]) else np.zeros(0)
+        sigma_a = _plane_sigma(view.pieces.lengths[h["i"]], p)
+        sigma_b = _plane_sigma(partner_len, p)
+        sigma_direction = np.hypot(np.hypot(sigma_a, sigma_b) / h["sine"], np.radians(p.direction_floor_deg))
+        depth = centers[:, 2]
+        sigma_lateral_m = depth * p.line_sigma_px / view.intr.fx
+        ray = unit_or_zero(centers)
+        normal_b_camera = np.stack([self._partner(view, b).normals[j] for b, j in zip(h["partner"], h["j"])]) \
+            @ T[:3, :3].T if len(h["j"]) else np.zeros((0, 3))
+        sine_ray = np.abs(np.sum(ray * normal_b_camera, axis=1))
+        # the partner's plane, off by its line's position across itself, moves the point along this
+        # ray (its turn about its own centre ray moves it little near the piece)
+        sigma_depth = sigma_lateral_m / np.maximum(sine_ray, 0.05)
+        confidence = np.ones(len(centers))
+        uv, _, _ = view.intr.project(centers)
+        return Segments(self.camera_frame, centers, directions, lengths, confidence, np.ones(len(centers), np.int64),
+                        {"sigma_depth_m": sigma_depth, "sigma_direction_rad": sigma_direction,
+                         "sigma_lateral_px": np.full(len(centers), p.line_sigma_px),
+                         "disparity_px": view.intr.fx * view.intr.baseline / np.maximum(depth, 1e-9),
+                         "u": uv[:, 0], "v": uv[:, 1], "piece": h["i"], "votes": h["votes"], "sine": h["sine"],
+                         "len_a": view.pieces.lengths[h["i"]], "len_b": partner_len})
+
+    def _partner(self, view: View, back: int) -> View:
+        return next(v for v in self.views if v.index == view.index - back)
