@@ -69,13 +69,13 @@ class AccumulateParams:
     precision on the box's surface from 0.57 to 0.72, completeness 0.454 both; what is left off the
     surface lies within the box, a few mm off the faces (the peer poses' depth offset).
 
-    ``temporal``: the frame's 3D segments also take lines triangulated across frames with the recorded
-    motion (``temporal_lines``: a left piece's plane meets a piece's plane of a frame 2 or 4 back, and
-    four of the five other buffered views show a piece along the line): of the pieces stereo left
-    (unmatched, critical), and ('replace') in place of a stereo segment whose direction they know
-    better, within four of its depth sigmas of it. 'auto': on with the gripper's motion, off with
-    tracked motion (the repaired poses are half a degree off; the lines trust the relative poses to a
-    tenth of one); None: stereo alone, the paper's. Measured on ``make suite`` (module docstring)."""
+    ``temporal`` (None: stereo alone, the paper's and the default): the frame's 3D segments also take
+    lines triangulated across frames with the used motion (``temporal_lines``: a left piece's plane
+    meets a piece's plane of a frame 2 or 4 back, and four of the five other buffered views show a
+    piece along the line): of the pieces stereo left (unmatched, critical), and ('replace') in place of
+    a stereo segment whose direction they know better, within four of its depth sigmas of it. They
+    trust the relative poses to a tenth of a degree (not for poses a degree off). Measured on ``make
+    suite`` in ``temporal_lines``' docstring, and why it is off by default."""
 
     extract: ExtractParams = field(default_factory=ExtractParams)
     line_model: LineModelParams = field(default_factory=LineModelParams)
@@ -86,14 +86,12 @@ class AccumulateParams:
     max_correction_deg: float = 10.0
     max_correction_m: float = 0.03
     box: tuple | None = None          # ((x_min, x_max), (y_min, y_max), (z_min, z_max))
-    temporal: TemporalParams | None | str = "auto"   # lines triangulated across frames too (below)
+    temporal: TemporalParams | None = None   # lines triangulated across frames too (below; None: stereo alone)
     temporal_mode: str = "replace"    # 'unused': of pieces stereo left; 'replace': and where surer than stereo
 
     def __post_init__(self):
         if self.motion not in MOTIONS:
             raise InputError(f"motion {self.motion!r}: expected one of {', '.join(MOTIONS)}")
-        if self.temporal == "auto":     # the lines across frames trust the relative poses to a tenth of a degree
-            object.__setattr__(self, "temporal", TemporalParams() if self.motion == "gripper" else None)
         if self.temporal_mode not in ("unused", "replace"):
             raise InputError(f"temporal_mode {self.temporal_mode!r}: expected 'unused' or 'replace'")
         if self.motion == "tracked" and self.rule.image_confirmation is not None:

@@ -27,15 +27,17 @@ def recording(name: str, **options) -> str:
     return str(path)
 
 
-def accumulate_params(view_planes: bool = True, motion: str = "gripper", image_confirm: bool = False):
+def accumulate_params(view_planes: bool = True, motion: str = "gripper", image_confirm: bool = False,
+                      across_frames: bool = False):
     """The accumulation parameters of the scoreboards: the defaults, or ``accum accumulate
-    --average-directions``, ``--motion tracked`` and / or ``--image-confirm``."""
+    --average-directions``, ``--motion tracked``, ``--image-confirm`` and / or ``--across-frames``."""
     from accumcli.accumulate import image_confirming
     from accumcli.line_model import LineModelParams
     from accumcli.pipeline import AccumulateParams
+    from accumcli.temporal_lines import TemporalParams
 
     return AccumulateParams(line_model=LineModelParams(view_planes=view_planes), motion=motion,
-                            rule=image_confirming(image_confirm))
+                            rule=image_confirming(image_confirm), temporal=TemporalParams() if across_frames else None)
 
 
 def run_child(code: str) -> dict:

@@ -115,11 +115,12 @@ def real_and_independent_rows() -> list[Row]:
 
 
 def score(row: Row, view_planes: bool = True, motion: str = "gripper", right_search: bool = False,
-          dither: int = 0, gradient_blur: float | None = None, image_confirm: bool = False) -> dict:
+          dither: int = 0, gradient_blur: float | None = None, image_confirm: bool = False,
+          across_frames: bool = False) -> dict:
     """Extract (with 2D segments), evaluate the frames; accumulate (``view_planes`` False: with
     ``accum accumulate --average-directions``; ``motion``: its ``--motion``; ``right_search``: both
-    with ``--right-search``; ``gradient_blur``: both with that ``--gradient-blur``; ``image_confirm``: the
-    accumulation with ``--image-confirm``), evaluate the model;
+    with ``--right-search``; ``gradient_blur``: both with that ``--gradient-blur``; ``image_confirm``,
+    ``across_frames``: the accumulation with ``--image-confirm``, ``--across-frames``), evaluate the model;
     ``dither``: the images' extra noise pattern (``RecordingOptions``), whose files go apart
     (out/bench/suite keeps the recording's own)."""
     from dataclasses import replace
@@ -139,11 +140,12 @@ def score(row: Row, view_planes: bool = True, motion: str = "gripper", right_sea
     # a variant's files apart (make uncertainty reads the default's)
     suffix = (("" if view_planes else "_average_directions") + ("" if motion == "gripper" else f"_{motion}")
               + ("_right_search" if right_search else "") + ("_image_confirm" if image_confirm else "")
+              + ("_across_frames" if across_frames else "")
               + ("_dithered" if dither else "")
               + ("" if gradient_blur is None else f"_blur{gradient_blur:g}"))
     lines = LineParams() if gradient_blur is None else LineParams(blur_sigma=gradient_blur)
     extract_params = ExtractParams(lines=lines, guided=GuidedParams(enabled=right_search))
-    params = replace(accumulate_params(view_planes, motion, image_confirm), extract=extract_params)
+    params = replace(accumulate_params(view_planes, motion, image_confirm, across_frames), extract=extract_params)
     out = CACHE / f"suite{suffix}"
     out.mkdir(parents=True, exist_ok=True)
     frames_file, model_file = out / f"{row.name}.frames.jsonl", out / f"{row.name}.model.json"
@@ -222,9 +224,11 @@ def main(argv=None) -> int:
                         help="extract and accumulate with this --gradient-blur (a variant: docs/suite.md is not written)")
     parser.add_argument("--image-confirm", action="store_true",
                         help="accumulate with --image-confirm (a variant: docs/suite.md is not written)")
+    parser.add_argument("--across-frames", action="store_true",
+                        help="accumulate with --across-frames (a variant: docs/suite.md is not written)")
     args = parser.parse_args(argv)
     variant = (args.average_directions or args.motion != "gripper" or args.right_search or args.image_confirm
-               or args.gradient_blur is not None)
+               or args.across_frames or args.gradient_blur is not None)
     rows = simulated_rows() + real_and_independent_rows()
     if args.only:
         rows = [r for r in rows if args.only in r.name]
@@ -234,7 +238,8 @@ def main(argv=None) -> int:
     results = score_rows(rows, repeated(functools.partial(score, view_planes=not args.average_directions,
                                                           motion=args.motion, right_search=args.right_search,
                                                           gradient_blur=args.gradient_blur,
-                                                          image_confirm=args.image_confirm),
+                                                          image_confirm=args.image_confirm,
+                                                          across_frames=args.across_frames),
                                         args.repeats))
     lines = table(results, rows) + ["", LOSS_TITLE, ""] + table(results, rows, LOSS_COLUMNS)
     print("\n".join(lines))

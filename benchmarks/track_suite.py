@@ -79,7 +79,7 @@ def rows() -> list[Row]:
     return out
 
 
-def score(row: Row, view_planes: bool = True, image_confirm: bool = False) -> dict:
+def score(row: Row, view_planes: bool = True, image_confirm: bool = False, across_frames: bool = False) -> dict:
     from accumcli.geometry import pose_error
     from accumcli.model_io import read_truth
     from accumcli.runs import FrameRange, RecordingOptions, accumulate_recording, track_recording
@@ -87,7 +87,8 @@ def score(row: Row, view_planes: bool = True, image_confirm: bool = False) -> di
     (CACHE / "track_suite").mkdir(parents=True, exist_ok=True)
     model = accumulate_recording(row.model_path, options=RecordingOptions(object_frame=row.object_frame),
                                  frames=FrameRange(*row.model_frames),
-                                 params=accumulate_params(view_planes, image_confirm=image_confirm)).model
+                                 params=accumulate_params(view_planes, image_confirm=image_confirm,
+                                                          across_frames=across_frames)).model
     # the wrong model's object frame is not the tracked recording's: it stands for a model of another
     # object in the same frame (track refuses a model of another frame), started at sim_box's recorded pose
     track_frame = "gripper" if row.truth is None else row.object_frame
@@ -155,15 +156,17 @@ def main(argv=None) -> int:
                         help="models accumulated with --average-directions (a variant: docs/suite.md is not written)")
     parser.add_argument("--image-confirm", action="store_true",
                         help="models accumulated with --image-confirm (a variant: docs/suite.md is not written)")
+    parser.add_argument("--across-frames", action="store_true",
+                        help="models accumulated with --across-frames (a variant: docs/suite.md is not written)")
     args = parser.parse_args(argv)
     chosen = [r for r in rows() if not args.only or args.only in r.name]
     t0 = time.perf_counter()
     results = score_rows(chosen, functools.partial(score, view_planes=not args.average_directions,
-                                                   image_confirm=args.image_confirm))
+                                                   image_confirm=args.image_confirm, across_frames=args.across_frames))
     lines = table(results, chosen)
     print("\n".join(lines))
     print(f"\n{len(chosen)} rows in {time.perf_counter() - t0:.0f} s")
-    if not args.only and not args.average_directions and not args.image_confirm:
+    if not args.only and not args.average_directions and not args.image_confirm and not args.across_frames:
         save(lines)
     return 0
 

@@ -840,3 +840,24 @@ def test_image_confirm_is_refused_with_tracked_motion(tmp_path):
     assert result.exit_code == 1 and "--image-confirm needs the recorded poses" in result.output
     assert "Traceback" not in result.output and len(result.output.strip().splitlines()) == 1
     assert not (tmp_path / "m.json").exists()
+
+
+def test_across_frames_adds_lines_triangulated_across_frames_and_says_how_many(tmp_path):
+    """--across-frames: the report counts the lines across frames among the 3D segments, each
+    history row carries its frame's count, and the model, judged against the truth, is at least as
+    complete as the stereo-only default at a precision of 0.95 or more."""
+    import json
+
+    scores = {}
+    for name, extra in (("default", []), ("across", ["--across-frames"])):
+        result = run("accumulate", "sample_data/sim_box.mcap", "-o", tmp_path / f"{name}.json", "--truth",
+                     "sample_data/sim_box.truth.json", "--history", tmp_path / f"{name}.jsonl", *extra)
+        assert result.exit_code == 0, result.output
+        rows = [json.loads(line) for line in (tmp_path / f"{name}.jsonl").read_text().splitlines()]
+        scores[name] = rows[-1]      # the model as written, against the truth
+        assert ("lines across frames:" in result.output) == (name == "across")
+        assert all(("across_frames" in row) == (name == "across") for row in rows)
+    counted = sum(row["across_frames"] for row in rows)
+    assert counted > 0 and f"lines across frames: {counted} of the" in result.output
+    assert scores["across"]["precision"] >= 0.95
+    assert scores["across"]["completeness"] >= scores["default"]["completeness"]

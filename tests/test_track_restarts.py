@@ -40,10 +40,8 @@ BLUR_BEFORE = ExtractParams(lines=LineParams(blur_sigma=1.0),
 
 @pytest.fixture(scope="module")
 def dev_steps_model():
-    # stereo alone, as when this case was found: with the lines across frames the model's frames 29 to 32
-    # lose one frame without restarts, and the restarts do not find it
     return accumulate_recording(str(DEVSET / "dev_steps.mcap"), params=AccumulateParams(
-        extract=BLUR_BEFORE, line_model=LineModelParams(merge_twins=False, dominant=None), temporal=None)).model
+        extract=BLUR_BEFORE, line_model=LineModelParams(merge_twins=False, dominant=None))).model
 
 
 @needs_devset

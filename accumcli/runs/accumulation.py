@@ -346,8 +346,7 @@ def tracked_poses(frames_with_pose, params: AccumulateParams, object_frame: str,
     def accepted(extractions, pose_of) -> Segments:
         """The accepted segments of an accumulation, with the known motion, of (frame, extraction) pairs,
         each frame placed by ``pose_of(frame)``."""
-        accumulation = LineAccumulation(AccumulateParams(params.extract, averaging, params.rule, box=params.box,
-                                                         temporal=None),
+        accumulation = LineAccumulation(AccumulateParams(params.extract, averaging, params.rule, box=params.box),
                                         object_frame, camera_frame)
         for frame, extraction in extractions:
             accumulation.step(frame, pose_of(frame), extraction)
