@@ -35,7 +35,8 @@ rows (dev_tprofile 0.637 -> 0.687, sim_105 0.483 -> 0.516, sim_104 0.791 -> 0.81
 precision median 0.971 -> 0.970, mean 0.946 both (sim_105 0.884 -> 0.931, sim_104 0.989 -> 0.960,
 sim_109 0.984 -> 0.972), the same four rows under 0.95. Off by default (``AccumulateParams.temporal``):
 on the tracking scoreboard the fuller model of dev_steps started ``dev_steps_track`` at a coverage of
-0.449 where it needs 0.45 and stayed lost for 9 frames (tracked 0.983 -> 0.733; at the true poses of
+0.449 where it needs 0.45 and stayed lost for 9 frames (tracked 0.983 -> 0.733; 0.833 since a start
+its frame does not verify still starts the next frames, ``PoseTracker.update``; at the true poses of
 frames 0 to 5 it covers 0.44 to 0.49 of this model, 0.47 to 0.51 of the default); sim_201 0.333 -> 0.533, no
 false frame either way. With a blind right camera it builds the sample's model alone: precision 1.0,
 completeness 0.80. Cost (one core): 11 ms a frame on dev_cube_small, 20 on the sample, 175 on

@@ -230,7 +230,28 @@ def test_a_pose_refused_only_for_its_standard_deviations_is_followed_but_not_tra
     blind = PoseTracker(model_of_exact, replace(strict, min_coverage=1.01))
     first = blind.update(frames[0], frames[0].T_camera_object)
     assert first.status == "lost" and "coverage" in first.reason and not blind.history
-    assert not np.isfinite(blind.update(frames[1]).T_camera_object).any()
+    second = blind.update(frames[1])    # from the given start (``update``), not from the refused pose
+    assert second.status == "lost" and not blind.history
+
+
+def test_a_given_start_that_its_frame_does_not_verify_still_starts_the_next_frames(noisy_pair, model_of_exact):
+    """The first frame shows nothing (flat grey): its given pose is not verified. The next frames, with
+    no re-acquisition, start from it and are tracked on the truth; a start older than max_gap_s
+    starts nothing (its frames have nothing to start from)."""
+    exact, _ = noisy_pair
+    truth = read_truth(exact.replace(".mcap", ".truth.json"))
+    with Recording(exact) as rec:
+        frames = list(rec.frames(0, 4))
+    blank = replace(frames[0], left=np.full_like(frames[0].left, 128), right=np.full_like(frames[0].right, 128))
+    for max_gap_s, expected in ((0.5, "tracked"), (1e-9, "lost")):
+        tracker = PoseTracker(model_of_exact, TrackParams(max_gap_s=max_gap_s))
+        assert tracker.update(blank, frames[0].T_camera_object).status == "lost"
+        for frame in frames[1:]:
+            estimate = tracker.update(frame)
+            assert estimate.status == expected
+            if expected == "tracked":
+                rotation, translation = pose_error(estimate.T_camera_object, truth.pose_at(frame.timestamp_ns))
+                assert rotation < 0.3 and translation < 0.001
 
 
 def test_ransac_recovers_a_pose_from_3d_segments():
@@ -400,9 +421,12 @@ def test_reacquisition_on_flat_grey_images_or_too_few_segments_is_lost_with_a_re
     first = tracker.update(frame, T_FRONT, lambda: observed(frame))       # refined on flat images: no edges
     assert first.status == "lost" and first.reason.startswith("0 model points found an image edge (needs 6)")
     assert reason in first.reason
-    again = tracker.update(frame, None, lambda: observed(frame))         # no tracked frame: nothing to refine
-    assert again.status == "lost" and not np.isfinite(again.T_camera_object).any()
-    assert again.reason.startswith("no pose to start from") and reason in again.reason
+    again = tracker.update(frame, None, lambda: observed(frame))         # from the given start (``update``)
+    assert again.status == "lost" and not np.isfinite(again.T_camera_object).any()   # re-acquisition ran: no pose
+    assert again.reason.startswith("0 model points found an image edge") and reason in again.reason
+    fresh = PoseTracker(_box_model()).update(frame, None, lambda: observed(frame))   # no start, no tracked frame
+    assert fresh.status == "lost" and not np.isfinite(fresh.T_camera_object).any()
+    assert fresh.reason.startswith("no pose to start from") and reason in fresh.reason
 
 
 def test_a_model_with_no_segment_in_view_is_lost_with_a_reason():
