@@ -92,6 +92,10 @@ class AccumulateParams:
     def __post_init__(self):
         if self.motion not in MOTIONS:
             raise InputError(f"motion {self.motion!r}: expected one of {', '.join(MOTIONS)}")
+        if self.motion == "tracked" and self.temporal is not None:
+            # the repaired poses are half a degree off: the lines trust the relative poses to a tenth of one
+            raise InputError("--across-frames needs the recorded poses: with --motion tracked they are half a degree "
+                             "off; drop one of the two")
         if self.temporal_mode not in ("unused", "replace"):
             raise InputError(f"temporal_mode {self.temporal_mode!r}: expected 'unused' or 'replace'")
         if self.motion == "tracked" and self.rule.image_confirmation is not None:
@@ -166,15 +170,17 @@ class LineAccumulation:
                                *self._miss_test_inputs(frame, extraction), shared=self._shared,
                                pose_covariance=pose_covariance, right_gradients=self._right_gradients(frame, extraction))
         segments = extraction.segments
-        across = (0, 0)
+        # the lines across frames among the segments, the pieces they came from, the stereo segments replaced
+        across, taken, replaced = np.zeros(len(segments), bool), np.zeros(0, np.int64), 0
         if self._temporal is not None:
             t0 = time.perf_counter()
-            segments, across = self._with_temporal(frame, extraction, T_camera_object)
+            segments, across, taken, replaced = self._with_temporal(frame, extraction, T_camera_object)
             self.times.add("across frames", t0)
         given = len(segments)
         if self.params.box is not None:
-            segments = segments.select(inside_box(transform_points(invert(T_camera_object), segments.centers),
-                                                  np.asarray(self.params.box, float)))
+            inside = inside_box(transform_points(invert(T_camera_object), segments.centers),
+                                np.asarray(self.params.box, float))
+            segments, across = segments.select(inside), across[inside]
         stats = self.core.update(segments, invert(T_camera_object), context)
         core, rules = self.core, self.params.line_model
         known = direction_known(core.entities, rules)
@@ -183,6 +189,7 @@ class LineAccumulation:
             unsure = (core.log_odds >= 0) & (core.last_confirmed != core.frame - 1) & ~known
             unused = np.ones(len(extraction.left), bool)
             unused[extraction.left_index] = False
+            unused[taken] = False        # a piece that gave a line across frames gives no plane again
             taken = planes_from_image(core.entities, unsure, extraction.left.select(unused), context, rules)
             known[taken] = direction_known(core.entities.select(taken), rules)
         # accepted as the model is written (``to_model``: a segment's direction must be sure too)
@@ -190,13 +197,15 @@ class LineAccumulation:
         if rules.dominant is not None and rules.dominant.observations:     # for the next frame's observations
             self._shared = shared_directions(core.entities, (core.log_odds >= 0) & known, rules)
         log.debug("frame %d: %s", frame.index, ", ".join(f"{k} {v}" for k, v in stats.__dict__.items()))
-        return AccumulationStep(frame, extraction, T_camera_object, stats, estimate, given - len(segments), *across)
+        return AccumulationStep(frame, extraction, T_camera_object, stats, estimate, given - len(segments),
+                                int(across.sum()), replaced)
 
     def _with_temporal(self, frame: StereoFrame, extraction: FrameSegments, T_camera_object: np.ndarray
-                       ) -> tuple[Segments, tuple[int, int]]:
+                       ) -> tuple[Segments, np.ndarray, np.ndarray, int]:
         """The frame's stereo segments with those triangulated across frames (``temporal_lines``): of the
         pieces stereo left ('unused'), and ('replace') in place of a stereo segment whose direction they
-        know better; and how many were taken, and of them in place of a stereo one."""
+        know better; which of the segments are such lines (bool), the left pieces they came from, and
+        how many stereo segments they replaced."""
         stereo = extraction.segments
         segment_of_piece = np.full(len(extraction.left), -1)
         segment_of_piece[extraction.left_index] = np.arange(len(extraction.left_index))
@@ -214,7 +223,7 @@ class LineAccumulation:
             distance[:, placed] = middle - slack, middle + slack
         found = self._temporal.step(extraction.left, T_camera_object, frame.intrinsics, frame.index, wanted, distance)
         if not len(found):
-            return stereo, (0, 0)
+            return stereo, np.zeros(len(stereo), bool), np.zeros(0, np.int64), 0
         found.frame_id = stereo.frame_id
         k = segment_of_piece[found.extra["piece"]]
         used = k >= 0
@@ -225,8 +234,9 @@ class LineAccumulation:
             take = ~used | surer
         else:
             take = ~used
+        kept = int(keep_stereo.sum())
         return (concatenate([stereo.select(keep_stereo), found.select(take)], stereo.frame_id),
-                (int(take.sum()), int(np.sum(~keep_stereo))))
+                np.arange(kept + int(take.sum())) >= kept, found.extra["piece"][take], len(stereo) - kept)
 
     def _miss_test_inputs(self, frame: StereoFrame, extraction: FrameSegments
                           ) -> tuple[Gradients | None, Segments2D | None]:

@@ -17,7 +17,7 @@ the line must be shown by ``min_votes`` of the other buffered views (a piece alo
 gratings of parallel background lines through (the motion moved them along themselves onto their
 neighbours): with three of four verifying views 94 of sim_104's 742 lines lay more than 30 mm from
 the object, with four of four 3 of 322, with four of five (the default) 10 of 460. A piece keeps its best-verified partner, none when another verifies a different
-line nearly as well (ambiguous). A piece that stereo placed keeps only a line within four of its
+line as often (ambiguous, ``ambiguous_votes``). A piece that stereo placed keeps only a line within four of its
 depth sigmas (and 3 mm).
 
 Sigmas, measured on the devset (``benchmarks``-style, against the truth): a line's direction error
@@ -35,8 +35,8 @@ rows (dev_tprofile 0.637 -> 0.687, sim_105 0.483 -> 0.516, sim_104 0.791 -> 0.81
 precision median 0.971 -> 0.970, mean 0.946 both (sim_105 0.884 -> 0.931, sim_104 0.989 -> 0.960,
 sim_109 0.984 -> 0.972), the same four rows under 0.95. Off by default (``AccumulateParams.temporal``):
 on the tracking scoreboard the fuller model of dev_steps started ``dev_steps_track`` at a coverage of
-0.449 where it needs 0.45 and stayed lost for 9 frames (tracked 0.983 -> 0.733; 0.833 since a start
-its frame does not verify still starts the next frames, ``PoseTracker.update``; at the true poses of
+0.449 where it needs 0.45, lost its first 9 frames and 7 more (tracked 0.983 -> 0.733; 0.833, 10 frames
+not tracked, since a start its frame does not verify still starts the next ones, ``PoseTracker.update``; at the true poses of
 frames 0 to 5 it covers 0.44 to 0.49 of this model, 0.47 to 0.51 of the default); sim_201 0.333 -> 0.533, no
 false frame either way. With a blind right camera it builds the sample's model alone: precision 1.0,
 completeness 0.80. Cost (one core): 11 ms a frame on dev_cube_small, 20 on the sample, 175 on
@@ -54,10 +54,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .geometry import invert, transform_points, unit_or_zero
+from .geometry import invert, rotate_vectors, transform_points, unit_or_zero
 from .lines2d import Segments2D
 from .recording.calibration import StereoIntrinsics
 from .segments import Segments
+from .stereo import view_plane_normals
 
 
 @dataclass(frozen=True)
@@ -67,6 +68,8 @@ class TemporalParams:
     min_length_px: float = 6.0      # shorter pieces fix no plane worth intersecting
     min_dihedral_deg: float = 8.0   # the two planes meet at least this steeply
     min_overlap: float = 0.5        # of the shorter piece's extent, along the line they meet on
+    min_ray_sine: float = 0.2       # a piece's rays cross its line at least this steeply
+    max_stretch: float = 3.0        # and its extent on the line is at most this times what it spans
     near_m: float = 0.1             # in front of both cameras, at least this far
     reach_m: float = 0.4            # and within this of the object frame's origin (the gripper's)
     still_px: float = 1.5           # a pair on one image line (this near across it) is the background's
@@ -112,12 +115,11 @@ class View:
     @classmethod
     def of(cls, pieces: Segments2D, T_camera_object: np.ndarray, intr: StereoIntrinsics, index: int,
            p: "TemporalParams") -> "View":
-        K_inv = np.linalg.inv(intr.K)
-        ends_px = pieces.endpoints().reshape(-1, 2)
-        rays_camera = np.column_stack([ends_px, np.ones(len(ends_px))]) @ K_inv.T
+        ends_px = pieces.endpoints()
+        rays_camera = np.concatenate([ends_px, np.ones((len(ends_px), 2, 1))], axis=2) @ np.linalg.inv(intr.K).T
         R = T_camera_object[:3, :3]
-        rays = unit_or_zero(rays_camera @ R).reshape(-1, 2, 3)      # R^T r, camera -> object
-        normals = unit_or_zero(np.cross(rays[:, 0], rays[:, 1]))
+        rays = unit_or_zero(rays_camera @ R)                       # R^T r: camera -> object frame, (N, 2, 3)
+        normals = unit_or_zero(view_plane_normals(ends_px[:, 0], ends_px[:, 1], intr) @ R)
         camera = invert(T_camera_object)[:3, 3]
         enter, leave = _reach_on_rays(camera, rays.reshape(-1, 3), p)
         return cls(camera, normals, rays, pieces, T_camera_object, intr, index,
@@ -128,15 +130,6 @@ def _plane_sigma(lengths_px: np.ndarray, p: TemporalParams) -> np.ndarray:
     """(N,) rad: how far a piece's plane turns, as it meets another: ``plane_turn_px_rad`` over its
     length, at least ``plane_sigma_deg`` (measured, ``TemporalParams``)."""
     return np.hypot(np.radians(p.plane_sigma_deg), p.plane_turn_px_rad / np.maximum(lengths_px, 1.0))
-
-
-def _on_ray(camera: np.ndarray, rays: np.ndarray, plane_point: np.ndarray, plane_normals: np.ndarray) -> np.ndarray:
-    """(K,) metres along unit ``rays`` (K, 3) from ``camera`` to the planes (``plane_normals`` (K, 3)
-    through ``plane_point``); nan where a ray runs along its plane."""
-    denominator = np.sum(rays * plane_normals, axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        distance = np.sum((plane_point - camera) * plane_normals, axis=1) / denominator
-    return np.where(np.abs(denominator) > 1e-3, distance, np.nan)
 
 
 def _reach_on_rays(camera: np.ndarray, rays: np.ndarray, p: TemporalParams) -> tuple[np.ndarray, np.ndarray]:
@@ -167,7 +160,7 @@ def _candidate_pairs(a: View, b: View, ia: np.ndarray, jb: np.ndarray, p: Tempor
     lo, hi = angle.min(axis=1), angle.max(axis=1)
     usable = hi - lo < np.pi / 2                # a piece around the epipole: no interval
     # the angle to the baseline of b's rays, and of the points of a's rays within reach seen from b
-    enter, leave = _reach_on_rays(a.camera, a.ends[ia].reshape(-1, 3), p)
+    enter, leave = a.reach[0][ia].reshape(-1), a.reach[1][ia].reshape(-1)
     reach = np.concatenate([a.camera + enter[:, None] * a.ends[ia].reshape(-1, 3),
                             a.camera + leave[:, None] * a.ends[ia].reshape(-1, 3)]) - b.camera
     elevation_a = (unit_or_zero(reach) @ axis).reshape(2, -1, 2).transpose(1, 0, 2).reshape(-1, 4)  # cosines
@@ -223,10 +216,28 @@ def pair_hypotheses(a: View, b: View, p: TemporalParams, wanted: np.ndarray | No
     a0, a1 = np.minimum(along_a[:, 0], along_a[:, 1]), np.maximum(along_a[:, 0], along_a[:, 1])
     b0, b1 = np.minimum(along_b[:, 0], along_b[:, 1]), np.maximum(along_b[:, 0], along_b[:, 1])
     lo, hi = np.maximum(a0, b0), np.minimum(a1, b1)
-    keep = (hi - lo) >= p.min_overlap * np.minimum(a1 - a0, b1 - b0)
+    keep = ((hi - lo) >= p.min_overlap * np.minimum(a1 - a0, b1 - b0)) & \
+        _well_cut(ra, ta, a1 - a0, direction, a.pieces.lengths[i] / a.intr.fx, nb, p) & \
+        _well_cut(rb, tb, b1 - b0, direction, b.pieces.lengths[j] / b.intr.fx, na, p)
     along = (lambda t: (origin + t[:, None] * direction)[keep])
     return {"i": i[keep], "j": j[keep], "direction": direction[keep], "sine": sine[keep],
             "start": along(lo), "end": along(hi), "a_start": along(a0), "a_end": along(a1)}
+
+
+def _well_cut(rays: np.ndarray, distance: np.ndarray, extent: np.ndarray, direction: np.ndarray,
+              angle: np.ndarray, other_normal: np.ndarray, p: TemporalParams) -> np.ndarray:
+    """(K,) bool: a piece's extent on its line is well posed: its end ``rays`` (K, 2, 3) cross the line
+    (``direction`` (K, 3)) at ``min_ray_sine`` or more, the middle ray meets the other view's plane
+    (``other_normal``) at half the sine of ``min_dihedral_deg`` or more (it lies in its own plane, so
+    never steeper than the planes meet), and the ``extent`` (K,) metres is at most
+    ``max_stretch`` times what the piece spans at that ``distance`` (K, 2) (``angle`` (K,): its length
+    over fx). Where a ray runs nearly along the line or the plane, its end lands anywhere (a 12 px
+    piece made lines half a metre long on the sample); as ``stereo._ends_on_rays``."""
+    crossing = np.linalg.norm(np.cross(rays, direction[:, None]), axis=2).min(axis=1)
+    middle = unit_or_zero(rays.sum(axis=1))
+    spans = angle * (distance[:, 0] + distance[:, 1]) / 2
+    return (crossing >= p.min_ray_sine) & (extent <= p.max_stretch * spans) & \
+        (np.abs(_dot(middle, other_normal)) >= np.sin(np.radians(p.min_dihedral_deg)) / 2)
 
 
 def _dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -298,8 +309,8 @@ class TemporalLines:
 
     def step(self, pieces: Segments2D, T_camera_object: np.ndarray, intr: StereoIntrinsics, index: int,
              wanted: np.ndarray | None = None, distance: tuple | None = None) -> Segments:
-        """The current frame's 3D segments from pieces of it and of a buffered frame, verified in a
-        third (in the camera frame, with ``sigma_*`` extras as stereo gives them; module
+        """The current frame's 3D segments from pieces of it and of a buffered frame, verified in
+        ``min_votes`` of the others (in the camera frame, with ``sigma_*`` extras as stereo gives them; module
         docstring); then the frame joins the buffer."""
         view = View.of(pieces, T_camera_object, intr, index, self.params)
         found = self._hypotheses(view, wanted, distance)
@@ -309,10 +320,13 @@ class TemporalLines:
     def _hypotheses(self, view: View, wanted: np.ndarray | None, distance: tuple | None) -> Segments:
         p = self.params
         by_index = {v.index: v for v in self.views}
+        nearest = max(np.linalg.norm(view.camera) - p.reach_m, p.near_m)    # metres, camera to the object's ball
         rows = []
         for back in p.frames_back:
             partner = by_index.get(view.index - back)
-            if partner is None:
+            # planes through two cameras this close meet a line within reach at under min_dihedral_deg
+            if partner is None or np.linalg.norm(partner.camera - view.camera) < \
+                    np.sin(np.radians(p.min_dihedral_deg)) * nearest:
                 continue
             h = pair_hypotheses(view, partner, p, wanted, distance)
             if not len(h["i"]):
@@ -324,36 +338,32 @@ class TemporalLines:
                 votes[open_] += verified_in(w, h["start"][open_], h["end"][open_], p,
                                             view.pieces.select(h["i"][open_]))
             keep = votes >= p.min_votes
-            rows.append({k: v[keep] for k, v in h.items()} | {"votes": votes[keep], "partner": np.full(keep.sum(), back)})
-        if not rows:
-            return Segments.empty(self.camera_frame)
-        h = {k: np.concatenate([r[k] for r in rows]) for k in rows[0]}
+            rows.append({k: v[keep] for k, v in h.items()} | {"votes": votes[keep],
+                                                             "b_length": partner.pieces.lengths[h["j"][keep]],
+                                                             "b_normal": partner.normals[h["j"][keep]]})
+        h = {k: np.concatenate([r[k] for r in rows]) for k in rows[0]} if rows else {"i": np.zeros(0, int)}
         if not len(h["i"]):
             return Segments.empty(self.camera_frame)
-        # one line per current piece: the most votes, then the steepest planes; dropped when another
-        # partner with as many votes puts it on a different line
+        # one line per current piece: the most votes, then the steepest planes; none when any other
+        # candidate of the piece verified as often (``ambiguous_votes``) puts it on a different line
         order = np.lexsort((-h["sine"], -h["votes"], h["i"]))
         i_sorted = h["i"][order]
         first = np.r_[True, i_sorted[1:] != i_sorted[:-1]]
+        group = np.cumsum(first) - 1
         best = order[first]
-        # the runner-up of each piece: ambiguous if it has as many votes and another direction
-        pos = np.flatnonzero(first)
-        following = np.minimum(pos + 1, len(order) - 1)
-        runner = np.where((pos + 1 < len(order)) & (i_sorted[following] == i_sorted[pos]), order[following], -1)
-        r = runner >= 0
-        ambiguous = np.zeros(len(best), bool)
-        same_votes = h["votes"][runner[r]] >= h["votes"][best[r]] - p.ambiguous_votes
-        cosine = np.abs(np.sum(h["direction"][runner[r]] * h["direction"][best[r]], axis=1))
+        of_best = best[group]
         middle = (h["a_start"] + h["a_end"]) / 2
-        apart = np.linalg.norm(middle[runner[r]] - middle[best[r]], axis=1)
-        ambiguous[r] = same_votes & ((cosine < np.cos(np.radians(p.same_line_deg))) | (apart > p.same_line_m))
-        best = best[~ambiguous]
-        return self._segments(view, {k: v[best] for k, v in h.items()})
+        close = h["votes"][order] >= h["votes"][of_best] - p.ambiguous_votes
+        differ = (np.abs(_dot(h["direction"][order], h["direction"][of_best])) < np.cos(np.radians(p.same_line_deg))) | \
+            (np.linalg.norm(middle[order] - middle[of_best], axis=1) > p.same_line_m)
+        ambiguous = np.bincount(group[close & differ], minlength=len(best)) > 0
+        return self._segments(view, {k: v[best[~ambiguous]] for k, v in h.items()})
 
     def _segments(self, view: View, h: dict) -> Segments:
         """3D segments (camera frame of ``view``) of the current pieces' extents on their lines, with
         the sigmas of the triangulation: direction from the two planes' angles over their dihedral
-        sine, depth from the partner plane's position across itself over the ray's angle to it."""
+        sine, depth from the partner plane's position across itself over the ray's angle to it.
+        Confidence 1: a line four other views show is as sure as a stereo match of score 1."""
         p = self.params
         T = view.T_camera_object
         start, end = transform_points(T, h["a_start"]), transform_points(T, h["a_end"])
@@ -361,28 +371,19 @@ class TemporalLines:
         vec = end - start
         lengths = np.linalg.norm(vec, axis=1)
         directions = vec / np.maximum(lengths, 1e-12)[:, None]
-        partner_len = np.array([self._partner(view, b).pieces.lengths[j] for b, j in zip(h["partner"], h["j"])]) \
-            if len(h["j"]) else np.zeros(0)
         sigma_a = _plane_sigma(view.pieces.lengths[h["i"]], p)
-        sigma_b = _plane_sigma(partner_len, p)
+        sigma_b = _plane_sigma(h["b_length"], p)
         sigma_direction = np.hypot(np.hypot(sigma_a, sigma_b) / h["sine"], np.radians(p.direction_floor_deg))
         depth = centers[:, 2]
         sigma_lateral_m = depth * p.line_sigma_px / view.intr.fx
-        ray = unit_or_zero(centers)
-        normal_b_camera = np.stack([self._partner(view, b).normals[j] for b, j in zip(h["partner"], h["j"])]) \
-            @ T[:3, :3].T if len(h["j"]) else np.zeros((0, 3))
-        sine_ray = np.abs(np.sum(ray * normal_b_camera, axis=1))
+        sine_ray = np.abs(_dot(unit_or_zero(centers), rotate_vectors(T, h["b_normal"])))
         # the partner's plane, off by its line's position across itself, moves the point along this
         # ray (its turn about its own centre ray moves it little near the piece)
-        sigma_depth = sigma_lateral_m / np.maximum(sine_ray, 0.05)
-        confidence = np.ones(len(centers))
+        sigma_depth = sigma_lateral_m / np.maximum(sine_ray, np.sin(np.radians(p.min_dihedral_deg)) / 4)   # ``_well_cut``
         uv, _, _ = view.intr.project(centers)
-        return Segments(self.camera_frame, centers, directions, lengths, confidence, np.ones(len(centers), np.int64),
+        return Segments(self.camera_frame, centers, directions, lengths, np.ones(len(centers)),
+                        np.ones(len(centers), np.int64),
                         {"sigma_depth_m": sigma_depth, "sigma_direction_rad": sigma_direction,
                          "sigma_lateral_px": np.full(len(centers), p.line_sigma_px),
                          "disparity_px": view.intr.fx * view.intr.baseline / np.maximum(depth, 1e-9),
-                         "u": uv[:, 0], "v": uv[:, 1], "piece": h["i"], "votes": h["votes"], "sine": h["sine"],
-                         "len_a": view.pieces.lengths[h["i"]], "len_b": partner_len})
-
-    def _partner(self, view: View, back: int) -> View:
-        return next(v for v in self.views if v.index == view.index - back)
+                         "u": uv[:, 0], "v": uv[:, 1], "piece": h["i"], "votes": h["votes"]})

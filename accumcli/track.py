@@ -1252,9 +1252,9 @@ class PoseTracker:
         ``Gradients`` if already computed (pass the same to the extraction behind ``observe`` so that
         the frame's gradients are computed once).
 
-        A given start (``T_guess``) that its frame does not verify still starts the next frames, as
-        the motion's last pose, until one is tracked or ``max_gap_s`` has passed: it is the caller's
-        pose, not a guess (a first frame blurred or occluded made every frame until a re-acquisition
+        A given start (``T_guess``, not a ``rough_guess``) that its frame does not verify still starts
+        the next frames, as the motion's last pose, until one is tracked or ``max_gap_s`` has passed: it
+        is the caller's pose (the recorded one), not a guess (a first frame blurred or occluded made every frame until a re-acquisition
         'lost'; on the tracking scoreboard dev_steps with the model of ``--across-frames``, whose
         start covered 0.449 of the 0.45 needed, tracked 0.733 -> 0.833; no row of the default models
         changed). When the motion since the last tracked frame is unknown (no guess and no tracked frame yet,
@@ -1286,12 +1286,12 @@ class PoseTracker:
         grads = _gradients(frame, p, gradients)
         gap = (frame.timestamp_ns - self.history[-1][0]) * 1e-9 if self.history else None
         # a given start that its frame did not verify still starts the next frames (``_start``)
-        start = self._start if (T_guess is None and not self.history and self._start is not None and
-                                (frame.timestamp_ns - self._start[0]) * 1e-9 <= p.max_gap_s) else None
-        reacquiring = T_guess is None and start is None and (gap is None or gap > p.max_gap_s)
+        given_start = self._start if (T_guess is None and not self.history and self._start is not None and
+                                      (frame.timestamp_ns - self._start[0]) * 1e-9 <= p.max_gap_s) else None
+        reacquiring = T_guess is None and given_start is None and (gap is None or gap > p.max_gap_s)
         if reacquiring or T_guess is not None:    # a start, or no motion known (any aspect may show): forget
             self._accepted.extra.pop(FOUND_RATE, None)
-        guesses = [T_guess] if T_guess is not None else [start[1]] if start is not None else \
+        guesses = [T_guess] if T_guess is not None else [given_start[1]] if given_start is not None else \
             self.predict(frame.timestamp_ns)
         # the better start first; the other too unless the first verifies and the two are not distinct
         # (within distinct_deg, distinct_m: they would end at the same pose, or be called ambiguous)
@@ -1388,8 +1388,8 @@ class PoseTracker:
             self._learn_from_next_verified = False
             self.params = calibrated(self.params, best)   # verified under the defaults: a right pose
             self.limits_source = f"frame {frame.index}, the first verified (the starting pose did not fit)"
-        if T_guess is not None:
-            self._start = None if best.status == "tracked" else (frame.timestamp_ns, T_guess)
+        if T_guess is not None:     # a user's rough guess may be a symmetric twin: its frames re-acquire instead
+            self._start = None if best.status == "tracked" or rough_guess else (frame.timestamp_ns, T_guess)
         if best.status == "tracked":
             self._remember_found(best)
             self.history = (self.history + [(frame.timestamp_ns, best.T_camera_object)])[-2:]

@@ -842,6 +842,16 @@ def test_image_confirm_is_refused_with_tracked_motion(tmp_path):
     assert not (tmp_path / "m.json").exists()
 
 
+def test_across_frames_is_refused_with_tracked_motion(tmp_path):
+    """--across-frames trusts the relative poses to a tenth of a degree; --motion tracked repairs poses
+    that are off by more: refused in one line, exit 1, no model written."""
+    result = run("accumulate", "sample_data/sim_box.mcap", "-o", tmp_path / "m.json", "--across-frames",
+                 "--motion", "tracked")
+    assert result.exit_code == 1 and "--across-frames needs the recorded poses" in result.output
+    assert "Traceback" not in result.output and len(result.output.strip().splitlines()) == 1
+    assert not (tmp_path / "m.json").exists()
+
+
 def test_across_frames_adds_lines_triangulated_across_frames_and_says_how_many(tmp_path):
     """--across-frames: the report counts the lines across frames among the 3D segments, each
     history row carries its frame's count, and the model, judged against the truth, is at least as

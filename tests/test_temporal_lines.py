@@ -107,6 +107,7 @@ def test_an_object_turning_in_front_of_the_camera_gives_its_lines_and_the_still_
         steep_total += steep.sum()
         steep_found += np.isin(np.flatnonzero(steep), found.extra["piece"][on_cube]).sum()
         assert np.max(distance) < 2e-3 and np.max(angle) < 2.0        # near a cube edge, every one ...
+        assert np.max(found.lengths) < 0.02                              # ... as long as its 15 mm piece
         assert np.mean((distance < 1e-6) & (angle < 0.01)) >= 0.9      # ... and exactly on it, nearly all
     # the rest: shorter than min_length_px in a view, or on an image line that barely moved (``still_px``)
     assert steep_total >= 100 and steep_found >= 0.9 * steep_total
@@ -152,3 +153,21 @@ def test_with_a_right_camera_that_shows_nothing_the_lines_across_frames_alone_bu
     assert figures["stereo only"]["accepted"] == 0
     assert figures["across frames"]["precision"] >= 0.95
     assert figures["across frames"]["completeness"] >= 0.6
+
+
+def test_frames_at_one_pose_give_no_line_and_no_pairs():
+    """The gripper holding still: every view's camera is at the same place in the object frame, no two
+    planes of one edge meet at the least angle, and no pair is even formed (all pairs of 300 pieces
+    were formed before: quadratic in time and memory)."""
+    from accumcli import temporal_lines
+
+    pieces, T, _ = next(_frames(1, clutter=300))
+    temporal = TemporalLines(TemporalParams())
+    formed = []
+    real = temporal_lines.pair_hypotheses
+    temporal_lines.pair_hypotheses = lambda *args, **kwargs: formed.append(1) or real(*args, **kwargs)
+    try:
+        found = [temporal.step(pieces, T, INTR, k) for k in range(8)]
+    finally:
+        temporal_lines.pair_hypotheses = real
+    assert all(len(f) == 0 for f in found) and not formed
