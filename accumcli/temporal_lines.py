@@ -28,19 +28,22 @@ partner's plane. On exact pieces with 0.15 px of noise the errors over sigma hav
 the object (within 20 mm) 0.91 to 0.99 of the lines were right (4 mm / 10 degrees) on dev_tprofile,
 dev_cube_small and sim_104, against 0.60 to 0.88 of their stereo segments.
 
-Measured on ``make suite`` (``benchmarks/suite.py --across-frames``, 4 runs a row, 2026-12-08):
-completeness median 0.774 -> 0.781, mean 0.745 -> 0.758, worst row 0.450 -> 0.466, higher on 17 of 19
-rows (dev_tprofile 0.637 -> 0.687, sim_105 0.483 -> 0.516, sim_104 0.791 -> 0.811, sim_103 0.884 ->
-0.900), the real chessboard and teabox the same (the teabox barely turns: 0.3 degrees a frame);
-precision median 0.971 -> 0.970, mean 0.946 both (sim_105 0.884 -> 0.931, sim_104 0.989 -> 0.960,
-sim_109 0.984 -> 0.972), the same four rows under 0.95. Off by default (``AccumulateParams.temporal``):
-on the tracking scoreboard the fuller model of dev_steps started ``dev_steps_track`` at a coverage of
-0.449 where it needs 0.45, lost its first 9 frames and 7 more (tracked 0.983 -> 0.733; 0.833, 10 frames
-not tracked, since a start its frame does not verify still starts the next ones, ``PoseTracker.update``; at the true poses of
-frames 0 to 5 it covers 0.44 to 0.49 of this model, 0.47 to 0.51 of the default); sim_201 0.333 -> 0.533, no
-false frame either way. With a blind right camera it builds the sample's model alone: precision 1.0,
-completeness 0.80. Cost (one core): 11 ms a frame on dev_cube_small, 20 on the sample, 175 on
-sim_101's crowded frames (2,800 pieces; its extraction takes 125).
+Measured on ``make suite`` (``benchmarks/suite.py --across-frames``, 4 runs a row, 2026-12-08, at
+91c317a): completeness median 0.774 -> 0.778, mean 0.745 -> 0.756, worst row 0.450 -> 0.465, higher on
+16 of 19 rows (dev_tprofile 0.637 -> 0.668, sim_105 0.483 -> 0.517, sim_104 0.791 -> 0.810, sim_103
+0.884 -> 0.900), sim_102, the real chessboard and teabox the same (the teabox barely turns: 0.3
+degrees a frame); precision median 0.971 -> 0.969, mean 0.946 -> 0.947 (sim_105 0.884 -> 0.928,
+sim_104 0.989 -> 0.965, sim_106 0.967 -> 0.987), the same four rows under 0.95; background the same.
+Tracking with these models (``benchmarks/track_suite.py --across-frames``): no false frame, the
+wrong model lost everywhere, dev_steps 0.983 tracked (0.158 deg / 0.258 mm), sim_201 0.333 -> 0.533,
+sim_206 0.800 -> 0.767. Before the extent gates (``_well_cut``; lines half a metre long from 12 px
+pieces) and the ambiguity over every candidate, completeness was about the same (median 0.781) but
+dev_steps' model tracked 0.733 of dev_steps_track. Off by default (``AccumulateParams.temporal``)
+until ``make motion`` has measured it: issue 10's figure compares ``--motion tracked`` (which refuses
+these lines) with the exact-pose model that they would change. With a blind right camera it builds
+the sample's model alone: precision 1.0, completeness 0.80. Cost (one core): 11 ms a frame on
+dev_cube_small, 15 on the sample, about 175 on sim_101's crowded frames (2,800 pieces; its
+extraction takes 125).
 
 Why written here: OpenCV has no line triangulation across posed views with these gates (its sfm
 module's is not in the wheels and takes matched lines, which is the hard part).

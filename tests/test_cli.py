@@ -832,22 +832,13 @@ def test_plane_agreement_needs_view_planes(tmp_path):
     assert not (tmp_path / "m.json").exists()
 
 
-def test_image_confirm_is_refused_with_tracked_motion(tmp_path):
-    """--image-confirm judges segments on the images at the recorded poses; --motion tracked fits the
-    poses to the same images: refused in one line, exit 1, no model written."""
-    result = run("accumulate", "sample_data/sim_box.mcap", "-o", tmp_path / "m.json", "--image-confirm",
-                 "--motion", "tracked")
-    assert result.exit_code == 1 and "--image-confirm needs the recorded poses" in result.output
-    assert "Traceback" not in result.output and len(result.output.strip().splitlines()) == 1
-    assert not (tmp_path / "m.json").exists()
-
-
-def test_across_frames_is_refused_with_tracked_motion(tmp_path):
-    """--across-frames trusts the relative poses to a tenth of a degree; --motion tracked repairs poses
-    that are off by more: refused in one line, exit 1, no model written."""
-    result = run("accumulate", "sample_data/sim_box.mcap", "-o", tmp_path / "m.json", "--across-frames",
-                 "--motion", "tracked")
-    assert result.exit_code == 1 and "--across-frames needs the recorded poses" in result.output
+@pytest.mark.parametrize("option", ["--image-confirm", "--across-frames"])
+def test_options_that_trust_the_recorded_poses_are_refused_with_tracked_motion(tmp_path, option):
+    """--image-confirm judges segments on the images at the recorded poses, --across-frames trusts the
+    relative poses to a tenth of a degree; --motion tracked fits the poses to the same images, half a
+    degree off: refused in one line, exit 1, no model written."""
+    result = run("accumulate", "sample_data/sim_box.mcap", "-o", tmp_path / "m.json", option, "--motion", "tracked")
+    assert result.exit_code == 1 and f"{option} needs the recorded poses" in result.output
     assert "Traceback" not in result.output and len(result.output.strip().splitlines()) == 1
     assert not (tmp_path / "m.json").exists()
 
