@@ -403,9 +403,9 @@ def extract(recording, output, rrd, with_2d, workers, frames, extract_params, op
               help="Also triangulate lines across frames with the recorded motion: a left-image edge meets its own "
                    "plane of a frame 2 or 4 back, checked in four more frames (a wide baseline for the short and "
                    "near-horizontal edges one stereo pair places badly or not at all): fuller models (make suite: "
-                   "completeness higher on 17 of 19 rows, precision the same); off by default: the fuller model "
-                   "of dev_steps started tracking its other recording under the coverage it needs (README). It "
-                   "trusts the relative poses to a tenth of a degree: not for poses a degree off.")
+                   "completeness higher on 16 of 19 rows, precision the same; README); off by default until make "
+                   "motion has measured it. It trusts the relative poses to a tenth of a degree: not with --motion "
+                   "tracked.")
 @box_option
 @frame_workers_option
 @frames_option
@@ -427,9 +427,9 @@ def accumulate(recording, outputs, ply_all, rrd, truth, history, plot, png, pane
     from .metric import MetricThresholds
     from .pipeline import AccumulateParams
     from .report import accumulation_lines
-    from .temporal_lines import TemporalParams
     from .runs import accumulate_recording
     from .runs.base import MODEL_OUTPUTS, POSES_OUTPUTS
+    from .temporal_lines import TemporalParams
 
     _check_formats(outputs, MODEL_OUTPUTS)
     _check_formats(poses, POSES_OUTPUTS, "--poses")

@@ -171,10 +171,10 @@ class LineAccumulation:
                                pose_covariance=pose_covariance, right_gradients=self._right_gradients(frame, extraction))
         segments = extraction.segments
         # the lines across frames among the segments, the pieces they came from, the stereo segments replaced
-        across, taken, replaced = np.zeros(len(segments), bool), np.zeros(0, np.int64), 0
+        across, lined, replaced = np.zeros(len(segments), bool), np.zeros(0, np.int64), 0
         if self._temporal is not None:
             t0 = time.perf_counter()
-            segments, across, taken, replaced = self._with_temporal(frame, extraction, T_camera_object)
+            segments, across, lined, replaced = self._with_temporal(frame, extraction, T_camera_object)
             self.times.add("across frames", t0)
         given = len(segments)
         if self.params.box is not None:
@@ -189,7 +189,7 @@ class LineAccumulation:
             unsure = (core.log_odds >= 0) & (core.last_confirmed != core.frame - 1) & ~known
             unused = np.ones(len(extraction.left), bool)
             unused[extraction.left_index] = False
-            unused[taken] = False        # a piece that gave a line across frames gives no plane again
+            unused[lined] = False        # a piece that gave a line across frames gives no plane again
             taken = planes_from_image(core.entities, unsure, extraction.left.select(unused), context, rules)
             known[taken] = direction_known(core.entities.select(taken), rules)
         # accepted as the model is written (``to_model``: a segment's direction must be sure too)

@@ -1254,10 +1254,10 @@ class PoseTracker:
 
         A given start (``T_guess``, not a ``rough_guess``) that its frame does not verify still starts
         the next frames, as the motion's last pose, until one is tracked or ``max_gap_s`` has passed: it
-        is the caller's pose (the recorded one), not a guess (a first frame blurred or occluded made every frame until a re-acquisition
-        'lost'; on the tracking scoreboard dev_steps with the model of ``--across-frames``, whose
-        start covered 0.449 of the 0.45 needed, tracked 0.733 -> 0.833; no row of the default models
-        changed). When the motion since the last tracked frame is unknown (no guess and no tracked frame yet,
+        is the caller's pose (the recorded one), not a guess. Before, a first frame blurred or occluded
+        left every frame until a re-acquisition 'lost' (on the tracking scoreboard, dev_steps with a
+        first model of ``--across-frames`` whose start covered 0.449 of the 0.45 needed: tracked
+        0.733 -> 0.833); no row of the default models changed. When the motion since the last tracked frame is unknown (no guess and no tracked frame yet,
         or a gap longer than ``max_gap_s``: snapshots rather than video), or when no refinement is
         verified, the frame is a re-acquisition (given ``observe``): the RANSAC poses are refined on
         the images too, and every verified candidate must also have 3D support (at least
