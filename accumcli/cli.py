@@ -403,8 +403,8 @@ def extract(recording, output, rrd, with_2d, workers, frames, extract_params, op
               help="Also triangulate lines across frames with the recorded motion: a left-image edge meets its own "
                    "plane of a frame 2 or 4 back, checked in four more frames (a wide baseline for the short and "
                    "near-horizontal edges one stereo pair places badly or not at all): fuller models (make suite: "
-                   "completeness higher on 16 of 19 rows, precision the same; README); off by default until make "
-                   "motion has measured it. It trusts the relative poses to a tenth of a degree: not with --motion "
+                   "completeness higher on 16 of 19 rows, precision the same; README); off by default: --motion "
+                   "tracked cannot use them, and its models fall further behind the recorded poses'. It trusts the relative poses to a tenth of a degree: not with --motion "
                    "tracked.")
 @box_option
 @frame_workers_option

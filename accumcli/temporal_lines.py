@@ -38,9 +38,11 @@ Tracking with these models (``benchmarks/track_suite.py --across-frames``): no f
 wrong model lost everywhere, dev_steps 0.983 tracked (0.158 deg / 0.258 mm), sim_201 0.333 -> 0.533,
 sim_206 0.800 -> 0.767. Before the extent gates (``_well_cut``; lines half a metre long from 12 px
 pieces) and the ambiguity over every candidate, completeness was about the same (median 0.781) but
-dev_steps' model tracked 0.733 of dev_steps_track. Off by default (``AccumulateParams.temporal``)
-until ``make motion`` has measured it: issue 10's figure compares ``--motion tracked`` (which refuses
-these lines) with the exact-pose model that they would change. With a blind right camera it builds
+dev_steps' model tracked 0.733 of dev_steps_track. Off by default (``AccumulateParams.temporal``):
+issue 10's figure compares ``--motion tracked`` (which refuses these lines) with the exact-pose model,
+and with them on for the recorded poses ``make motion`` had 3 or 4 of 12 scenes within 0.02 instead
+of 8 (median shortfall 0.025 to 0.029 against 0.014; two runs that shared a cache by mistake: a rough
+measurement). With a blind right camera it builds
 the sample's model alone: precision 1.0, completeness 0.80. Cost (one core): 11 ms a frame on
 dev_cube_small, 15 on the sample, about 175 on sim_101's crowded frames (2,800 pieces; its
 extraction takes 125).
