@@ -15,6 +15,12 @@ def best_per_key(keys: np.ndarray, cost: np.ndarray) -> np.ndarray:
     return order[first]
 
 
+def ranges(first: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """(count.sum(),) the indices first[k] .. first[k] + count[k] - 1 of every k in turn: the hits of a
+    sorted search (``np.searchsorted`` gives ``first`` and ``count``) without a loop."""
+    return np.repeat(first, count) + np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+
+
 def group_range(groups: np.ndarray, n: int, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(n,) smallest and (n,) largest of ``values`` per group 0..n-1 (inf and -inf for an empty one).
     Compiled (``group_kernel.group_range``): ``np.minimum.at`` ran 25 times slower on some arrays

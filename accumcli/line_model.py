@@ -101,7 +101,7 @@ from .edge_evidence import edge_evidence
 from .edge_search import edge_candidates
 from .geometry import check_points, check_transform, invert, outer, skew, transform_points, unit_or_zero
 from .grouping import best_per_key
-from .lines2d import Gradients, Segments2D
+from .lines2d import Gradients, Segments2D, pieces_along
 from .metric import MetricThresholds, candidate_pairs, d_o, d_p, pair_costs
 from .recording import StereoIntrinsics
 from .segments import Segments, concatenate
@@ -815,13 +815,9 @@ def _pieces_on(start: np.ndarray, end: np.ndarray, pieces: Segments2D, p: LineMo
     if not len(usable) or not len(pieces):
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
     middle, direction = (start + end)[usable] / 2, (end - start)[usable] / length[usable, None]
-    radius = length[usable].max() / 2 + IMAGE_PLANE_END_SLACK_PX + p.image_plane_gate_px   # the farthest that passes
-    pairs = cKDTree(middle).sparse_distance_matrix(cKDTree(pieces.centers), radius, output_type="ndarray")
-    i, j = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
-    rel = pieces.centers[j] - middle[i]
-    along = np.sum(rel * direction[i], axis=1)
-    across = np.abs(rel[:, 0] * direction[i, 1] - rel[:, 1] * direction[i, 0])
-    angle = np.degrees(np.arccos(np.clip(np.abs(np.sum(pieces.directions[j] * direction[i], axis=1)), 0, 1)))
+    reach = length[usable] / 2 + IMAGE_PLANE_END_SLACK_PX + p.image_plane_gate_px   # the farthest that passes
+    i, j, along, across, cosine = pieces_along(middle, direction, reach, pieces)
+    angle = np.degrees(np.arccos(np.clip(cosine, 0, 1)))
     on = (across <= p.image_plane_gate_px) & (angle <= p.image_plane_gate_deg) & \
         (np.abs(along) + pieces.lengths[j] / 2 <= length[usable][i] / 2 + IMAGE_PLANE_END_SLACK_PX)
     cost = (across / p.image_plane_gate_px) ** 2 + (angle / p.image_plane_gate_deg) ** 2

@@ -61,6 +61,7 @@ from functools import cached_property
 
 import cv2
 import numpy as np
+from scipy.spatial import cKDTree
 
 from .errors import InputError
 from .grouping import group_range
@@ -413,6 +414,28 @@ def directed_line_fit(index: np.ndarray, n_groups: int, xy: np.ndarray, w: np.nd
     if direction_weight is not None:
         direction = _weighted_line_fit(index, n_groups, xy, direction_weight)[2]
     return sw, center, direction
+
+
+def pieces_along(middle: np.ndarray, direction: np.ndarray, reach: np.ndarray, pieces: "Segments2D",
+                 tree=None) -> tuple[np.ndarray, ...]:
+    """Pairs (k, m) of segments (``middle`` (K, 2) px, unit ``direction`` (K, 2)) and the ``pieces``
+    whose centre lies within ``reach`` (K,) px of the middle, with each piece's place on its segment:
+    ``along`` (signed) and ``across`` px and the |cos| of their angle (``cosine``); what counts as
+    lying on the segment is the caller's test. One KD-tree search per class of reach, so that a few
+    long segments do not widen every search. ``tree``: a cKDTree of the pieces' centres, if built."""
+    tree = tree if tree is not None else cKDTree(pieces.centers)
+    k, m = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
+    for shortest, longest in ((0.0, 12.0), (12.0, 32.0), (32.0, np.inf)):
+        group = np.flatnonzero((reach >= shortest) & (reach < longest))
+        if len(group):
+            pairs = cKDTree(middle[group]).sparse_distance_matrix(tree, reach[group].max(), output_type="ndarray")
+            k.append(group[pairs["i"]])
+            m.append(pairs["j"].astype(np.int64))
+    k, m = np.concatenate(k), np.concatenate(m)
+    rel = pieces.centers[m] - middle[k]
+    along = np.sum(rel * direction[k], axis=1)
+    across = np.abs(rel[:, 0] * direction[k, 1] - rel[:, 1] * direction[k, 0])
+    return k, m, along, across, np.abs(np.sum(pieces.directions[m] * direction[k], axis=1))
 
 
 def dot2(a: np.ndarray, b: np.ndarray) -> np.ndarray:

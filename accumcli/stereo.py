@@ -143,7 +143,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .grouping import best_per_key, group_range
+from .grouping import best_per_key, group_range, ranges
 from .lines2d import Segments2D, dot2, sample
 from .recording import StereoIntrinsics
 from .segments import Segments
@@ -274,8 +274,7 @@ def _candidates(left: Segments2D, right: Segments2D, usable_l: np.ndarray, usabl
     start = np.searchsorted(v_sorted, v_left - reach)
     count = np.searchsorted(v_sorted, v_left + reach) - start
     li = np.repeat(usable_l, count)
-    offsets = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
-    rj = order[np.repeat(start, count) + offsets]
+    rj = order[ranges(start, count)]
     v = left.centers[li, 1]
     half_height = right.lengths[rj] / 2 * np.abs(right.directions[rj, 1]) + 0.5
     disparity = left.centers[li, 0] - _row_crossing(right, rj, v)
@@ -529,8 +528,7 @@ def triangulate(left: Segments2D, right: Segments2D, m: Matches, intr: StereoInt
                                                                         1e-9))
     # a plane is as sure as the shorter of its two lines (module docstring: an empirical figure)
     span = np.minimum(line_span(left, m.left), line_span(right, m.right))
-    plane_sigma = np.maximum(params.plane_sigma_deg,
-                             np.degrees(params.line_fit_sigma_px * np.sqrt(12) / np.maximum(span, 1.0)))
+    plane_sigma = plane_sigma_deg(span, params)
     sigma_direction = np.where(fitted, np.arctan2(depth_per_disparity * sigma_slope * 2 * np.abs(along),
                                                   np.maximum(length, 1e-9)),
                                np.radians(np.minimum(plane_sigma / np.maximum(planes_sine, 1e-9),
@@ -541,6 +539,13 @@ def triangulate(left: Segments2D, right: Segments2D, m: Matches, intr: StereoInt
                          "sigma_lateral_px": sigma_lateral, "disparity_px": d_center, "u": centers[:, 0],
                          "v": centers[:, 1]})
     return segments.select(idx), idx
+
+
+def plane_sigma_deg(span_px, params: StereoParams) -> np.ndarray:
+    """Degrees: how sure the plane of a 2D line ``span_px`` long is (its fit's angle error, at least
+    ``plane_sigma_deg``; module docstring: an empirical figure)."""
+    return np.maximum(params.plane_sigma_deg,
+                      np.degrees(params.line_fit_sigma_px * np.sqrt(12) / np.maximum(span_px, 1.0)))
 
 
 def crowding(seg: Segments2D, reach_px: float = 8.0, max_angle_deg: float = 10.0,

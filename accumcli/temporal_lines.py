@@ -60,7 +60,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .geometry import invert, rotate_vectors, transform_points, unit_or_zero
-from .lines2d import Segments2D
+from .grouping import ranges
+from .lines2d import Segments2D, pieces_along
 from .recording.calibration import StereoIntrinsics
 from .segments import Segments
 from .stereo import view_plane_normals
@@ -179,7 +180,7 @@ def _candidate_pairs(a: View, b: View, ia: np.ndarray, jb: np.ndarray, p: Tempor
     first = np.searchsorted(lo_b[order], lo_a - widest)
     count = np.where(ok_a, np.searchsorted(lo_b[order], hi_a, side="right") - first, 0)
     x = np.repeat(np.arange(len(ia)), count)
-    y = order[np.repeat(first, count) + np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)]
+    y = order[ranges(first, count)]
     keep = (hi_b[y] >= lo_a[x]) & (high_b[y] >= low_a[x]) & (low_b[y] <= high_a[x])
     return ia[x[keep]], jb[y[keep]]
 
@@ -280,20 +281,8 @@ def verified_in(view: View, start: np.ndarray, end: np.ndarray, p: TemporalParam
     middle = (uv0 + uv1)[usable] / 2
     direction = (uv1 - uv0)[usable] / length[usable, None]
     pieces = view.pieces
-    k, m = [], []
-    span = length[usable]
-    for shorter, longer in ((0.0, 20.0), (20.0, 60.0), (60.0, np.inf)):     # one search radius per length class
-        group = np.flatnonzero((span >= shorter) & (span < longer))
-        if len(group):
-            pairs = cKDTree(middle[group]).sparse_distance_matrix(view.tree(), span[group].max() / 2 + p.verify_px,
-                                                                  output_type="ndarray")
-            k.append(group[pairs["i"]])
-            m.append(pairs["j"].astype(np.int64))
-    k, m = np.concatenate(k), np.concatenate(m)
-    rel = pieces.centers[m] - middle[k]
-    along = np.sum(rel * direction[k], axis=1)
-    across = np.abs(rel[:, 0] * direction[k, 1] - rel[:, 1] * direction[k, 0])
-    cosine = np.abs(np.sum(pieces.directions[m] * direction[k], axis=1))
+    k, m, along, across, cosine = pieces_along(middle, direction, length[usable] / 2 + p.verify_px, pieces,
+                                               view.tree())
     on = (across <= p.verify_px) & (cosine >= np.cos(np.radians(p.verify_deg))) & \
         (np.abs(along) <= length[usable][k] / 2)
     if still is not None:

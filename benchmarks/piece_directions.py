@@ -135,7 +135,7 @@ def main() -> int:
                       f"{np.percentile(np.abs(rows[:, 3]), 90):.3f} | {np.median(rows[:, 4]):.3f} |")
     print("\n| image | line span px | count | angle error deg (1.4826 x median abs. deviation) | 90 % of abs error | "
           "stereo's plane sigma deg |\n|---|---|---|---|---|---|")
-    from accumcli.stereo import StereoParams
+    from accumcli.stereo import StereoParams, plane_sigma_deg
 
     params = StereoParams()
     for label, error, span in (("left", e[:, 6], e[:, 8]), ("right", e[:, 7], e[:, 9])):
@@ -143,8 +143,7 @@ def main() -> int:
             chosen = (span >= lo) & (span < hi) & np.isfinite(error)
             rows = error[chosen]
             if len(rows):   # the plane sigma that stereo claims at the bin's median span
-                claimed = max(params.plane_sigma_deg,
-                              np.degrees(params.line_fit_sigma_px * np.sqrt(12) / max(np.median(span[chosen]), 1.0)))
+                claimed = float(plane_sigma_deg(np.median(span[chosen]), params))
                 print(f"| {label} | {lo}-{hi if hi < LINE_SPAN_BINS_PX[-1] else ''} | {len(rows)} | "
                       f"{1.4826 * np.median(np.abs(rows - np.median(rows))):.2f} | {np.percentile(np.abs(rows), 90):.2f} | "
                       f"{claimed:.2f} |")
